@@ -1,0 +1,2 @@
+from .addon import register, unregister  # noqa: F401
+__all__ = ["register", "unregister"]

@@ -1,0 +1,39 @@
+"""Run in a fresh Python process with bpy: install the extension zip like a user, then use it.
+
+Usage: python install_extension.py EXTENSION_ZIP RESULT_JSON
+BLENDER_USER_RESOURCES must point at an empty folder. Prints one JSON line of findings.
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import bpy
+
+zip_path, result_path = sys.argv[1:3]
+report = {"install": sorted(bpy.ops.extensions.package_install_files(
+    filepath=zip_path, repo="user_default", enable_on_install=True))}
+module = "bl_ext.user_default.cable_reconstruction"
+report["enabled"] = module in bpy.context.preferences.addons
+report["operators"] = sorted(name for name in dir(bpy.types) if name.startswith("CABLE_RECON_OT"))
+report["panel"] = hasattr(bpy.types, "VIEW3D_PT_cable_recon")
+report["import_menu"] = any(getattr(f, "__module__", "").startswith(module)
+                            for f in bpy.types.TOPBAR_MT_file_import._dyn_ui_initialize())
+
+# The bundled wheels were unpacked for Blender and load from there (put first on the path so
+# the test environment's own copies cannot stand in for them).
+site = Path(bpy.utils.user_resource("EXTENSIONS")) / ".local" / "lib" / "python3.11" / "site-packages"
+sys.path.insert(0, str(site))
+report["wheels"] = {}
+for name in ("cv2", "pycolmap", "scipy", "networkx"):
+    for key in [k for k in sys.modules if k == name or k.startswith(name + ".")]:
+        del sys.modules[key]
+    module_file = Path(__import__(name).__file__)
+    report["wheels"][name] = str(module_file).startswith(str(site))
+
+bpy.ops.wm.read_homefile(use_empty=True)
+report["import_result"] = sorted(bpy.ops.cable_recon.import_result(filepath=result_path))
+curves = [o for o in bpy.data.objects if o.type == "CURVE"]
+report["curve"] = {"name": curves[0].name, "bevel": curves[0].data.bevel_depth,
+                   "points": sum(len(s.points) for s in curves[0].data.splines)} if curves else None
+print("REPORT " + json.dumps(report))

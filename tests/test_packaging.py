@@ -1,0 +1,109 @@
+"""The extension as users get it: Blender's validator, builder and installer on our package."""
+
+import json
+import os
+import re
+import subprocess
+import sys
+import tomllib
+import zipfile
+
+import pytest
+
+import package  # tools/package.py
+from conftest import ROOT
+from engine import __version__, read_result
+
+MANIFEST = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
+
+
+def test_blenders_validator_accepts_the_repository():
+    builder, tags = package.blender_tools()
+    run = subprocess.run([sys.executable, str(builder), "validate", str(ROOT),
+                          f"--valid-tags={tags}"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_manifest_matches_the_engine_and_supported_blenders():
+    assert MANIFEST["id"] == package.EXTENSION_ID
+    assert MANIFEST["version"] == __version__
+    assert MANIFEST["blender_version_min"] == "4.5.0"
+    assert MANIFEST["blender_version_max"] == "5.1.0"
+    assert set(MANIFEST["platforms"]) == set(package.PLATFORM_TAGS)
+    assert "files" in MANIFEST["permissions"]
+    excluded = MANIFEST["build"]["paths_exclude_pattern"]
+    for folder in ("/tests/", "/samples/", "/tools/", "/build/", "/dist/"):
+        assert folder in excluded
+
+
+def test_root_init_is_the_two_line_entry_point():
+    lines = (ROOT / "__init__.py").read_text().strip().splitlines()
+    assert lines[0] == "from .addon import register, unregister  # noqa: F401"
+    assert len(lines) == 2
+
+
+def _fake_wheel_cache(folder):
+    """Empty files named like each platform's real wheels (the builder only sorts by name)."""
+    tags = {"linux-x64": "cp311-cp311-manylinux_2_28_x86_64",
+            "macos-arm64": "cp311-cp311-macosx_14_0_arm64",
+            "windows-x64": "cp311-cp311-win_amd64"}
+    for platform, tag in tags.items():
+        (folder / platform).mkdir(parents=True)
+        for name, version in package.runtime_requirements():
+            wheel_name = re.sub(r"[-_.]+", "_", name).lower()
+            wheel_tag = "py3-none-any" if name == "networkx" else tag
+            (folder / platform / f"{wheel_name}-{version}-{wheel_tag}.whl").write_bytes(b"")
+
+
+def test_one_zip_per_platform_with_only_its_wheels(tmp_path):
+    _fake_wheel_cache(tmp_path / "cache")
+    zips = package.build(list(package.PLATFORM_TAGS), tmp_path / "dist",
+                         cache=tmp_path / "cache", stage_root=tmp_path / "stage")
+    assert len(zips) == 3
+    names = {name for name, _ in package.runtime_requirements()}
+    assert "numpy" not in names
+    for path, platform in zip(zips, package.PLATFORM_TAGS):
+        with zipfile.ZipFile(path) as archive:
+            files = archive.namelist()
+            manifest = tomllib.loads(archive.read("blender_manifest.toml").decode())
+        wheels = [f for f in files if f.endswith(".whl")]
+        assert len(wheels) == len(names)
+        marker = {"linux-x64": "manylinux", "macos-arm64": "macosx", "windows-x64": "win_amd64"}
+        for wheel in wheels:
+            assert marker[platform] in wheel or wheel.endswith("py3-none-any.whl"), wheel
+        generated = manifest["build"]["generated"]  # what Blender reads for a split build
+        assert generated["platforms"] == [platform]
+        assert sorted(generated["wheels"]) == sorted(f"./{w}" for w in wheels)
+        assert "__init__.py" in files and "addon/__init__.py" in files
+        assert "engine/result.py" in files
+        assert not [f for f in files if f.split("/")[0] in ("tests", "samples", "tools")]
+        assert not [f for f in files if "__pycache__" in f]
+
+
+@pytest.fixture(scope="module")
+def linux_zip(tmp_path_factory):
+    """The real linux-x64 zip; wheels are downloaded once into .cache/wheels and reused."""
+    (path,) = package.build(["linux-x64"], tmp_path_factory.mktemp("dist"),
+                            stage_root=tmp_path_factory.mktemp("stage"))
+    return path
+
+
+def test_installed_through_blenders_installer(linux_zip, tmp_path):
+    sample = ROOT / "samples" / "cable_result.json"
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "tests" / "blender_scripts" / "install_extension.py"),
+         str(linux_zip), str(sample)],
+        capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+    lines = [line for line in run.stdout.splitlines() if line.startswith("REPORT ")]
+    assert run.returncode == 0 and lines, run.stdout[-3000:] + run.stderr[-3000:]
+    report = json.loads(lines[-1][len("REPORT "):])
+    assert report["install"] == ["FINISHED"] and report["enabled"]
+    assert "CABLE_RECON_OT_import_result" in report["operators"]
+    assert report["panel"] and report["import_menu"]
+    assert report["wheels"] == {"cv2": True, "pycolmap": True, "scipy": True, "networkx": True}
+    assert report["import_result"] == ["FINISHED"]
+    expected = read_result(sample)
+    assert report["curve"]["name"] == "cable_result"
+    assert report["curve"]["points"] == sum(len(p.points) for p in expected.paths)
+    assert report["curve"]["bevel"] == pytest.approx(expected.radius)
