@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.requirements-installed
 
-.PHONY: setup demo test package clean
+.PHONY: setup demo test package sample clean
 
 setup: $(STAMP)
 
@@ -22,6 +22,10 @@ demo: setup
 
 test: setup
 	$(PY) -m pytest
+
+# Re-render the realistic sample with Cycles (slow: about 40 s a frame; never run by CI).
+sample: setup
+	$(PY) tools/render_sample.py --output samples/sequence --overwrite
 
 package: setup
 	$(PY) tools/package.py --output-dir dist

@@ -12,7 +12,8 @@ import pytest
 
 import package  # tools/package.py
 from conftest import ROOT
-from engine import __version__, read_result
+from engine import __version__, read_result, write_result
+from engine.ground_truth import read_ground_truth
 
 MANIFEST = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
 
@@ -89,7 +90,8 @@ def linux_zip(tmp_path_factory):
 
 
 def test_installed_through_blenders_installer(linux_zip, tmp_path):
-    sample = ROOT / "samples" / "cable_result.json"
+    truth = read_ground_truth(ROOT / "samples" / "sequence" / "ground_truth.json")
+    sample = write_result(truth.as_result(), tmp_path / "sample_cable.json")
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
     run = subprocess.run(
         [sys.executable, str(ROOT / "tests" / "blender_scripts" / "install_extension.py"),
@@ -104,6 +106,6 @@ def test_installed_through_blenders_installer(linux_zip, tmp_path):
     assert report["wheels"] == {"cv2": True, "pycolmap": True, "scipy": True, "networkx": True}
     assert report["import_result"] == ["FINISHED"]
     expected = read_result(sample)
-    assert report["curve"]["name"] == "cable_result"
+    assert report["curve"]["name"] == "sample_cable"
     assert report["curve"]["points"] == sum(len(p.points) for p in expected.paths)
     assert report["curve"]["bevel"] == pytest.approx(expected.radius)

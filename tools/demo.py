@@ -1,7 +1,7 @@
 """`make demo`: turn the bundled sample into a .blend with the bevelled cable curve.
 
-Until the reconstruction pipeline exists this imports the sample's result file
-(samples/cable_result.json) with the add-on's own import operator and saves the scene.
+Until the reconstruction pipeline exists this imports the sample's true cable (its ground
+truth written as a result file) with the add-on's own import operator and saves the scene.
 
     python tools/demo.py [-o build/demo/sample.blend]
 """
@@ -25,12 +25,16 @@ def main():
     package = load_addon_package()
     package.register()
     bpy.ops.wm.read_homefile(use_empty=True)
-    source = ROOT / "samples" / "cable_result.json"
+    from cable_reconstruction.engine import write_result
+    from cable_reconstruction.engine.ground_truth import read_ground_truth
+
+    output = Path(args.output).resolve()
+    output.parent.mkdir(parents=True, exist_ok=True)
+    truth = read_ground_truth(ROOT / "samples" / "sequence" / "ground_truth.json")
+    source = write_result(truth.as_result(), output.with_suffix(".json"), overwrite=True)
     if bpy.ops.cable_recon.import_result(filepath=str(source)) != {"FINISHED"}:
         sys.exit(f"importing {source} failed")
     obj = bpy.data.objects[source.stem]
-    output = Path(args.output).resolve()
-    output.parent.mkdir(parents=True, exist_ok=True)
     bpy.ops.wm.save_as_mainfile(filepath=str(output))
     points = sum(len(spline.points) for spline in obj.data.splines)
     cameras = sum(1 for o in bpy.data.objects if o.type == "CAMERA")

@@ -1,0 +1,217 @@
+"""Ground-truth scenes: layout guarantees over many seeds, exact masks, written scenes."""
+
+import json
+import math
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from engine import read_colmap_model
+from engine.ground_truth import read_ground_truth
+from engine.metrics import evaluate
+from engine.result import CablePath, Result
+from engine.synthetic_cameras import cable_pixel_width, handheld_cameras, orbit_cameras
+from engine.synthetic_layouts import (LayoutSettings, find_crossings_2d, hanging_layout,
+                                      knot_layout, table_layout)
+from engine.synthetic_render import render_masks, render_views
+from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+
+RULES = LayoutSettings()
+
+
+def strand_pairs(truth, distance):
+    """Pairs of samples closer than ``distance`` that are not neighbours along the cable."""
+    points = truth.centreline / truth.radius
+    arc = truth.arc_length / truth.radius
+    pairs = cKDTree(points).query_pairs(distance, output_type="ndarray")
+    gap = np.abs(arc[pairs[:, 0]] - arc[pairs[:, 1]]) if len(pairs) else np.zeros(0)
+    if truth.closed and len(pairs):
+        gap = np.minimum(gap, truth.length / truth.radius - gap)
+    return pairs[gap > 2.5] if len(pairs) else pairs
+
+
+def assert_layout_rules(truth, *, knot=False):
+    r = truth.radius
+    points = truth.centreline / r
+    # Strands never closer than 2 r in 3D.
+    assert len(strand_pairs(truth, 2.0 * (1 - 1e-6))) == 0
+    # Crossings: the count the truth claims is the count in the table plane, none grazing.
+    found = find_crossings_2d(points, closed=truth.closed)
+    assert len(found) == len(truth.crossings)
+    for crossing in truth.crossings:
+        assert crossing.angle >= RULES.min_crossing_angle
+        over, under = points[crossing.over], points[crossing.under]
+        assert np.linalg.norm(over[:2] - under[:2]) < 0.5  # same place on the table
+        assert over[2] - under[2] >= 2.0  # the upper strand is lifted over the lower one
+    # Spacing of crossings along the cable (a knot may be tighter inside).
+    arc = truth.arc_length / r
+    passes = np.sort([arc[i] for c in truth.crossings for i in (c.over, c.under)])
+    if len(passes) > 1:
+        assert np.diff(passes).min() >= (4.0 if knot else RULES.min_crossing_spacing) - 0.5
+    if len(passes) and not truth.closed:
+        assert passes[0] >= RULES.min_crossing_spacing - 0.5
+        assert arc[-1] - passes[-1] >= RULES.min_crossing_spacing - 0.5
+    # Bends no tighter than the rule.
+    ds = np.linalg.norm(np.diff(points, axis=0), axis=1).mean()
+    bend = np.linalg.norm(points[:-2] + points[2:] - 2 * points[1:-1], axis=1) / ds ** 2
+    assert bend.max() <= 1.0 / RULES.min_bend_radius + 0.02
+    # Lying on the table: never below it.
+    assert points[:, 2].min() >= 1.0 - 1e-9
+
+
+@pytest.mark.parametrize("crossings", [0, 1, 2, 3, 5, 8, 12])
+def test_table_layouts_honour_their_guarantees(crossings):
+    for seed in range(8):
+        truth = table_layout(crossings, seed=seed)
+        assert truth.kind == "table" and not truth.closed
+        assert_layout_rules(truth)
+
+
+@pytest.mark.parametrize("crossings", [0, 1, 4, 7])
+def test_closed_loops(crossings):
+    for seed in range(3):
+        truth = table_layout(crossings, seed=seed, closed=True)
+        assert truth.closed
+        assert_layout_rules(truth)
+
+
+def test_knots_alternate_over_and_under():
+    for seed in range(6):
+        truth = knot_layout(seed=seed)
+        assert len(truth.crossings) == 3
+        assert_layout_rules(truth, knot=True)
+        arc = truth.arc_length
+        passes = sorted((arc[i], role) for c in truth.crossings
+                        for i, role in ((c.over, "over"), (c.under, "under")))
+        roles = [role for _, role in passes]
+        assert all(a != b for a, b in zip(roles, roles[1:]))  # a true overhand knot
+
+
+def test_hanging_cables_are_3d():
+    for seed in range(4):
+        truth = hanging_layout(seed=seed)
+        points = truth.centreline / truth.radius
+        assert len(strand_pairs(truth, 2.0)) == 0 and not truth.crossings
+        assert points[:, 2].min() > 1.0  # in the air
+        # Not planar: the best-fitting plane leaves several radii of residual.
+        centred = points - points.mean(axis=0)
+        assert np.linalg.svd(centred, compute_uv=False)[-1] / math.sqrt(len(points)) > 2.0
+
+
+def test_same_seed_same_layout_and_sizes_scale():
+    a, b = table_layout(4, seed=9), table_layout(4, seed=9)
+    np.testing.assert_array_equal(a.centreline, b.centreline)
+    assert not np.array_equal(a.centreline, table_layout(4, seed=10).centreline)
+    small = table_layout(2, seed=1, radius=0.001, extent=0.2)
+    large = table_layout(2, seed=1, radius=0.01, extent=2.0)
+    np.testing.assert_allclose(small.centreline / small.radius, large.centreline / large.radius)
+
+
+@pytest.mark.parametrize("radius, extent", [(0.001, 0.2), (0.004, None), (0.01, 2.0)])
+def test_cable_is_at_least_five_pixels_wide(radius, extent):
+    truth = table_layout(3, seed=2, radius=radius, extent=extent)
+    for rig in (orbit_cameras, handheld_cameras):
+        assert cable_pixel_width(truth, rig(truth, views=12)) >= 5.0
+
+
+def test_too_thin_a_cable_is_refused():
+    with pytest.raises(ValueError, match="pixels wide"):
+        make_scene(SceneSpec(radius=0.001, extent=0.25, width=320, height=240, views=10))
+
+
+def tube_mask_by_distance(truth, camera):
+    """Independent check: pixels whose centre ray passes within r of the centreline."""
+    (fx, fy), (cx, cy) = camera.focal, camera.principal_point
+    rows, cols = np.mgrid[0:camera.height, 0:camera.width]
+    rays = np.stack([(cols + 0.5 - cx) / fx, (rows + 0.5 - cy) / fy,
+                     np.ones_like(cols, dtype=float)], axis=-1).reshape(-1, 3)
+    rays = rays @ camera.R  # to world directions
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    origin = camera.center
+    points = truth.centreline
+    a, b = points[:-1], points[1:]
+    best = np.full(len(rays), np.inf)
+    for start in range(0, len(a), 64):  # closest approach of each ray to each segment
+        p0, p1 = a[start:start + 64], b[start:start + 64]
+        d = p1 - p0
+        samples = np.linspace(0, 1, 5)
+        for s in samples:
+            q = p0 + s * d
+            w = q - origin
+            along = w @ rays.T
+            distance2 = (w * w).sum(axis=1)[:, None] - along ** 2
+            best = np.minimum(best, np.sqrt(np.maximum(distance2.min(axis=0), 0)))
+    return best.reshape(camera.height, camera.width) <= truth.radius
+
+
+def test_masks_are_the_projected_tube():
+    truth = table_layout(2, seed=5, radius=0.004)
+    camera = orbit_cameras(truth, views=10, width=320, height=240)[3]
+    mask = next(render_masks(truth, [camera]))
+    expected = tube_mask_by_distance(truth, camera)
+    assert mask.sum() > 500
+    disagree = mask ^ expected
+    # Only pixels on the silhouette may differ (sphere sweep vs sampled segments).
+    edges = cv2.dilate(expected.astype(np.uint8), None) ^ cv2.erode(expected.astype(np.uint8), None)
+    assert np.all(edges[disagree])
+    assert disagree.sum() < 0.05 * expected.sum()
+
+
+def test_renderer_shows_the_cable_and_the_occlusion_cue():
+    scene = make_scene(SceneSpec(crossings=3, seed=1, views=10, width=480, height=360))
+    assert len(scene.images) == 10 and scene.images[0].shape == (360, 480, 3)
+    for image, mask in zip(scene.images, scene.masks):
+        hsv = cv2.cvtColor(image, cv2.COLOR_RGB2HSV)
+        red = ((hsv[..., 0] < 10) | (hsv[..., 0] > 170)) & (hsv[..., 1] > 120)
+        # The cable is the red thing in the picture, the table is not.
+        assert (red & mask).sum() > 0.8 * mask.sum()
+        beside = cv2.dilate(mask.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0  # blurred rim
+        assert (red & ~beside).sum() < 0.01 * mask.sum()
+    # Where a strand passes under another it is darker than elsewhere on the cable.
+    truth, camera = scene.truth, scene.cameras[0]
+    image, mask = scene.images[0], scene.masks[0]
+    value = cv2.cvtColor(image, cv2.COLOR_RGB2HSV)[..., 2].astype(float)
+    pixels, depth = camera.project(truth.centreline)
+    under = [truth.crossings[k].under for k in range(3)]
+    near_under = np.zeros(mask.shape, dtype=bool)
+    for index in under:
+        for step in (-6, 6):  # beside the crossing, where the upper strand does not hide it
+            u, v = pixels[(index + step) % len(pixels)].astype(int)
+            near_under[max(v - 2, 0):v + 3, max(u - 2, 0):u + 3] = True
+    assert value[near_under & mask].mean() < value[mask].mean()
+
+
+def test_written_scene_round_trips(tmp_path):
+    scene = make_scene(SceneSpec(kind="knot", views=10, width=320, height=240, rig="handheld"))
+    folder = write_scene(scene, tmp_path / "knot")
+    names = sorted(p.name for p in (folder / "images").iterdir())
+    assert names == sorted(c.name for c in scene.cameras)
+    mask = cv2.imread(str(folder / "masks" / "000.png"), cv2.IMREAD_UNCHANGED)
+    assert mask.dtype == np.uint8 and set(np.unique(mask)) <= {0, 255}
+    np.testing.assert_array_equal(mask > 0, scene.masks[0])
+    model = read_colmap_model(folder / "sparse")
+    for original, back in zip(scene.cameras, model.cameras):
+        np.testing.assert_allclose(back.R, original.R, atol=1e-12)
+    truth = read_ground_truth(folder / "ground_truth.json")
+    np.testing.assert_allclose(truth.centreline, scene.truth.centreline)
+    assert [c.over for c in truth.crossings] == [c.over for c in scene.truth.crossings]
+    assert json.loads((folder / "ground_truth.json").read_text())["kind"] == "knot"
+    with pytest.raises(FileExistsError):
+        write_scene(scene, folder)
+
+
+def test_metrics_score_the_truth_of_every_kind_as_perfect():
+    for truth in (table_layout(5, seed=3), knot_layout(seed=2), hanging_layout(seed=1),
+                  table_layout(3, seed=1, closed=True)):
+        result = Result(radius=truth.radius,
+                        paths=(CablePath(truth.centreline, closed=truth.closed),))
+        metrics = evaluate(result, truth)
+        assert metrics.accuracy_max < 1e-6 and metrics.completeness == 1.0
+        assert metrics.one_path and metrics.crossings_right == len(truth.crossings)
+        flat = truth.centreline.copy()
+        flat[:, 2] = truth.radius
+        flattened = evaluate(Result(radius=truth.radius,
+                                    paths=(CablePath(flat, closed=truth.closed),)), truth)
+        assert flattened.crossings_right == 0
