@@ -1,7 +1,8 @@
 """A fast renderer of synthetic cable scenes, with no Blender: exact masks, plausible images.
 
 The cable is ray-cast exactly (a dense sweep of spheres of the cable's radius along the
-centreline: the tube's surface to within 1% of r), so its mask is the projected tube. The
+centreline: the tube's surface to within 1% of r, cut flat at free ends like Blender's filled
+bevel caps), so its mask is the projected tube. The
 table is one textured plane, warped into each view by its homography, so structure-from-motion
 sees the same surface from every view. Shading: diffuse and ambient light, a specular streak
 along the cable, ambient occlusion where a strand passes under another and on the table along
@@ -110,9 +111,10 @@ def render_masks(truth, cameras):
     ------
     ndarray, shape (H, W), bool
     """
-    spheres = _sweep(truth)[0]
+    spheres, _, tangents = _sweep(truth)
+    caps = _end_caps(spheres, tangents, truth.closed)
     for camera in cameras:
-        pixel = _ray_cast(camera, spheres, truth.radius)[0]
+        pixel = _ray_cast(camera, spheres, truth.radius, caps)[0]
         mask = np.zeros(camera.width * camera.height, dtype=bool)
         mask[pixel] = True
         yield mask.reshape(camera.height, camera.width)
@@ -204,8 +206,21 @@ def _sweep(truth):
     return spheres, samples, tangents
 
 
-def _ray_cast(camera, spheres, radius):
-    """Nearest hit of each pixel's ray on the sphere sweep.
+def _end_caps(spheres, tangents, closed):
+    """Flat ends of an open cable, as Blender's filled bevel caps: (sphere, centre, outward)."""
+    if closed:
+        return ()
+    return ((0, spheres[0], -tangents[0]), (len(spheres) - 1, spheres[-1], tangents[-1]))
+
+
+def _ray_cast(camera, spheres, radius, caps=()):
+    """Nearest hit of each pixel's ray on the sphere sweep, cut flat at the cable's ends.
+
+    Parameters
+    ----------
+    caps : sequence of (int, ndarray, ndarray)
+        Per free end: its sphere index, centre and outward tangent (:func:`_end_caps`). The
+        sweep is cut by the plane through the end and the end disc is added.
 
     Returns
     -------
@@ -214,7 +229,9 @@ def _ray_cast(camera, spheres, radius):
     depth : ndarray
         Depth (camera z) of each hit.
     sphere : ndarray of int
-        Which sphere each hit lies on.
+        Which sphere each hit lies on (for a cap: the end sphere).
+    on_cap : ndarray of bool
+        The hit lies on an end disc (its normal is the outward tangent).
     """
     (fx, fy), (cx, cy) = camera.focal, camera.principal_point
     width, height = camera.width, camera.height
@@ -229,7 +246,7 @@ def _ray_cast(camera, spheres, radius):
                      * (1.0 + np.hypot(u - cx, v - cy) / max(fx, fy) * 0.5) + 1.5, 0.0)
     visible = (z > 1.5 * radius) & (u + reach >= 0) & (u - reach < width) \
         & (v + reach >= 0) & (v - reach < height)
-    hits_pixel, hits_depth, hits_sphere = [], [], []
+    hits_pixel, hits_depth, hits_sphere, hits_cap = [], [], [], []
     index = np.flatnonzero(visible)
     half = np.ceil(reach[index]).astype(int)
     for h in np.unique(half):
@@ -249,19 +266,47 @@ def _ray_cast(camera, spheres, radius):
         disc = b * b - a * k
         hit = disc >= 0
         t = (b[hit] - np.sqrt(disc[hit])) / a[hit]
-        hits_pixel.append(py[hit] * width + px[hit])
-        hits_depth.append(t)
-        hits_sphere.append(which[hit])
+        keep = np.ones(len(t), dtype=bool)
+        near_end = int(np.ceil(1.0 / SPHERE_SPACING)) + 1  # spheres reaching past the end
+        for end_sphere, end, outward in caps:  # nothing of the sweep lies beyond a flat end
+            end_camera = camera.R @ end + camera.t
+            beyond = (ray[hit] * t[:, None] - end_camera) @ (camera.R @ outward) > 0
+            keep &= ~(beyond & (np.abs(which[hit] - end_sphere) <= near_end))
+        hits_pixel.append((py[hit] * width + px[hit])[keep])
+        hits_depth.append(t[keep])
+        hits_sphere.append(which[hit][keep])
+        hits_cap.append(np.zeros(int(keep.sum()), dtype=bool))
+    for end_sphere, end, outward in caps:  # the end discs themselves
+        centre, normal = camera.R @ end + camera.t, camera.R @ outward
+        if not visible[end_sphere]:
+            continue
+        h = int(np.ceil(reach[end_sphere]))
+        rows, cols = np.mgrid[-h:h + 1, -h:h + 1]
+        px = (np.floor(u[end_sphere]) + cols.ravel()).astype(np.int64)
+        py = (np.floor(v[end_sphere]) + rows.ravel()).astype(np.int64)
+        inside = (px >= 0) & (px < width) & (py >= 0) & (py < height)
+        px, py = px[inside], py[inside]
+        ray = np.stack([(px + 0.5 - cx) / fx, (py + 0.5 - cy) / fy, np.ones(len(px))], axis=1)
+        facing = ray @ normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (centre @ normal) / facing
+        on_disc = (facing != 0) & (t > 0) & (np.linalg.norm(ray * t[:, None] - centre, axis=1)
+                                            <= radius)
+        hits_pixel.append((py * width + px)[on_disc])
+        hits_depth.append(t[on_disc])
+        hits_sphere.append(np.full(int(on_disc.sum()), end_sphere))
+        hits_cap.append(np.ones(int(on_disc.sum()), dtype=bool))
     if not hits_pixel:
         empty = np.zeros(0, dtype=np.int64)
-        return empty, np.zeros(0), empty
+        return empty, np.zeros(0), empty, np.zeros(0, dtype=bool)
     pixel = np.concatenate(hits_pixel)
     depth = np.concatenate(hits_depth)
     sphere = np.concatenate(hits_sphere)
+    on_cap = np.concatenate(hits_cap)
     order = np.lexsort((depth, pixel))
-    pixel, depth, sphere = pixel[order], depth[order], sphere[order]
+    pixel, depth, sphere, on_cap = pixel[order], depth[order], sphere[order], on_cap[order]
     first = np.concatenate([[True], pixel[1:] != pixel[:-1]])
-    return pixel[first], depth[first], sphere[first]
+    return pixel[first], depth[first], sphere[first], on_cap[first]
 
 
 def render_views(truth, cameras, settings=RenderSettings(), *, texture=None):
@@ -293,6 +338,7 @@ def render_views(truth, cameras, settings=RenderSettings(), *, texture=None):
     centre, side = _table_geometry(truth)
     lit_table, to_world = _lit_table(truth, texture, settings, centre, side)
     spheres, sphere_arc, tangents = _sweep(truth)
+    caps = _end_caps(spheres, tangents, truth.closed)
     occlusion = _strand_occlusion(truth, spheres, sphere_arc)
     colour = np.asarray(settings.cable_colour, dtype=np.float64) / 255.0
     light = settings.light
@@ -307,7 +353,7 @@ def render_views(truth, cameras, settings=RenderSettings(), *, texture=None):
                                     flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                                     borderValue=(60, 60, 64)).astype(np.float64) / 255.0
         # Cable: exact hits, shaded.
-        pixel, depth, sphere = _ray_cast(camera, spheres, truth.radius)
+        pixel, depth, sphere, on_cap = _ray_cast(camera, spheres, truth.radius, caps)
         rows, cols = np.divmod(pixel, camera.width)
         (fx, fy), (cx, cy) = camera.focal, camera.principal_point
         ray = np.stack([(cols + 0.5 - cx) / fx, (rows + 0.5 - cy) / fy, np.ones(len(cols))], 1)
@@ -317,12 +363,10 @@ def render_views(truth, cameras, settings=RenderSettings(), *, texture=None):
         # The tube's normal is square to the cable; the sweep's spheres tilt it by up to 7°
         # along the cable, which would show as ribs. The caps at free ends keep theirs.
         along = np.einsum("ij,ij->i", normal, tangents[sphere])
-        end = np.zeros(len(spheres), dtype=bool)
-        if not truth.closed:
-            end[[0, -1]] = True
-        along = np.where(end[sphere], 0.0, along)
         normal -= along[:, None] * tangents[sphere]
-        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
+        for index, _, outward in caps:  # flat ends face along the cable
+            normal[on_cap & (sphere == index)] = outward
         view = camera.center - hit
         view /= np.linalg.norm(view, axis=1, keepdims=True)
         diffuse = np.clip(normal @ light, 0.0, None)

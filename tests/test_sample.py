@@ -74,3 +74,23 @@ def test_cycles_renderer_at_a_tiny_size(tmp_path):
                            capture_output=True, text=True, timeout=60)
     assert again.returncode != 0 and "already holds a sample" in again.stderr
     assert (out / "preview.jpg").is_file()
+
+
+def test_exact_masks_are_blenders_own_silhouette(tmp_path):
+    # Unlit white cable on black without pixel filter: a pixel is above half brightness
+    # (sRGB 188) exactly when more than half of it is covered, i.e. its centre is inside.
+    out = tmp_path / "flat"
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "render_sample.py"), "-o", str(out),
+         "--views", "2", "--size", "320x240", "--samples", "16", "--crossings", "3",
+         "--seed", "3", "--radius", "0.006", "--silhouette"],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
+        env=dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user")))
+    assert run.returncode == 0, run.stderr[-3000:]
+    for name in ("000", "001"):
+        silhouette = cv2.imread(str(out / "images" / f"{name}.png"))[..., 2] > 188
+        mask = cv2.imread(str(out / "masks" / f"{name}.png"), 0) > 0
+        assert mask.sum() > 2000
+        assert iou(silhouette, mask) > 0.98
+        (dx, dy), _ = cv2.phaseCorrelate(mask.astype(np.float32), silhouette.astype(np.float32))
+        assert abs(dx) < 0.1 and abs(dy) < 0.1  # no offset between the conventions

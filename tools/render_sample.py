@@ -84,6 +84,25 @@ def build_scene(bpy, package, truth, texture_path, samples):
     return scene
 
 
+def flatten_to_silhouette(bpy, scene):
+    """White unlit cable on black, no pixel filter: pixel value = the cable's coverage."""
+    cable = bpy.data.materials["cable"].node_tree
+    emission = cable.nodes.new("ShaderNodeEmission")
+    cable.links.new(emission.outputs[0], cable.nodes["Material Output"].inputs["Surface"])
+    table = bpy.data.materials["table"].node_tree
+    for link in list(table.links):
+        table.links.remove(link)
+    table.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0, 0, 0, 1)
+    table.links.new(table.nodes["Principled BSDF"].outputs[0],
+                    table.nodes["Material Output"].inputs["Surface"])
+    scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    bpy.data.objects["sun"].data.energy = 0.0
+    scene.view_settings.exposure = 0.0
+    scene.cycles.filter_width = 0.01
+    scene.cycles.use_denoising = False
+    scene.render.image_settings.file_format = "PNG"
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("-o", "--output", default=str(ROOT / "samples" / "sequence"))
@@ -94,6 +113,9 @@ def main():
     parser.add_argument("--radius", type=float, default=0.004, help="metres")
     parser.add_argument("--samples", type=int, default=32, help="Cycles samples per pixel")
     parser.add_argument("--overwrite", action="store_true")
+    parser.add_argument("--silhouette", action="store_true",
+                        help="render the bare silhouette (unlit cable, black table): for "
+                             "checking the exact masks against Blender's own geometry")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.lower().split("x"))
     output = Path(args.output)
@@ -124,6 +146,8 @@ def main():
         cv2.imwrite(str(texture_path), cv2.cvtColor(table_texture(args.seed, 4096),
                                                     cv2.COLOR_RGB2BGR))
         scene = build_scene(bpy, package, truth, texture_path, args.samples)
+        if args.silhouette:
+            flatten_to_silhouette(bpy, scene)
         rig = bpy.data.collections.new("cameras")
         scene.collection.children.link(rig)
         camera_objects = build_cameras(cameras, rig)
@@ -136,7 +160,8 @@ def main():
         for k, (camera, obj) in enumerate(zip(cameras, camera_objects)):
             started = time.time()
             scene.camera = obj
-            scene.render.filepath = str(output / "images" / camera.name)
+            name = Path(camera.name).with_suffix(".png").name if args.silhouette else camera.name
+            scene.render.filepath = str(output / "images" / name)
             bpy.ops.render.render(write_still=True)
             print(f"[{k + 1}/{len(cameras)}] {camera.name} {time.time() - started:.0f} s",
                   file=sys.stderr, flush=True)
