@@ -8,7 +8,8 @@ import logging
 import sys
 
 from . import __version__
-from .errors import InputError, ReconstructionError
+from .errors import Cancelled, InputError, ReconstructionError
+from .settings_cli import add_settings_arguments, settings_from_arguments
 
 __all__ = ["main", "build_parser"]
 
@@ -16,15 +17,113 @@ EXIT_OK, EXIT_BAD_INPUT, EXIT_FAILED = 0, 2, 3
 log = logging.getLogger(__name__)
 
 
+class ProgressBar:
+    """``progress(fraction, message)`` drawn as one line on stderr (redrawn on a terminal)."""
+
+    def __init__(self, stream=sys.stderr, width=30):
+        self.stream, self.width = stream, width
+        self.live = stream.isatty()
+        self.last = None
+
+    def __call__(self, fraction, message):
+        filled = int(round(self.width * min(max(fraction, 0.0), 1.0)))
+        line = f"[{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:3.0f}% {message}"
+        if self.live:
+            self.stream.write("\r" + line[:120].ljust(120))
+            if fraction >= 1.0:
+                self.stream.write("\n")
+        elif line != self.last:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+        self.last = line
+
+
+def _run_segment(args):
+    from .segment_command import segment_sequence_to_folder
+    from .segmentation import ColourRange, SegmentationSettings
+
+    colour = ColourRange.parse(args.hsv) if args.hsv else None
+    settings = settings_from_arguments(SegmentationSettings, args)
+    colour, widths = segment_sequence_to_folder(
+        args.images, args.output, colour=colour, settings=settings,
+        reference_frame=args.reference_frame, overwrite=args.overwrite,
+        progress=None if args.quiet else ProgressBar())
+    log.info("%d frames, cable %.1f-%.1f px wide, --hsv %s", len(widths), min(widths),
+             max(widths), colour)
+
+
+def _run_cameras(args):
+    from .camera_estimation import cameras_command
+
+    estimate = cameras_command(args.images, args.output, overwrite=args.overwrite,
+                               progress=None if args.quiet else ProgressBar())
+    if estimate.unregistered:
+        log.warning("did not register: %s", ", ".join(estimate.unregistered))
+    log.info("%d cameras written to %s", len(estimate.cameras), args.output)
+
+
+def _run_bench(args):
+    from .benchmarks import bench_segment, format_table
+
+    if args.stage == "segment":
+        rows = bench_segment(sample=args.sample, views=args.views)
+    else:
+        from .camera_estimation import bench_cameras
+
+        rows = bench_cameras(views=args.views, include_sample=True)
+    print(format_table(rows))
+
+
 def build_parser():
-    """The argument parser; subcommands are added by the stages as they exist."""
+    """The argument parser with every stage command."""
+    from .segmentation import SegmentationSettings
+
     parser = argparse.ArgumentParser(
         prog="python -m engine",
         description="Reconstruct a cable, rope or hose from photos as one continuous curve.",
     )
     parser.add_argument("--version", action="version", version=f"cable_recon {__version__}")
     parser.add_argument("-q", "--quiet", action="store_true", help="only print errors")
-    parser.add_subparsers(dest="command", metavar="COMMAND")
+    # -q also after the command (a subcommand's default must not undo a -q given before it).
+    quiet = argparse.ArgumentParser(add_help=False)
+    quiet.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                       help="only print errors")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    segment = commands.add_parser(
+        "segment", parents=[quiet], help="write cable masks and junction maps of every frame",
+        description="Segment the cable in every frame: OUT/masks/*.png (cable = 255), "
+                    "OUT/junctions/*.png and OUT/contact_sheet.png for a quick look.")
+    segment.add_argument("images", help="folder of .jpg/.png frames, or a video")
+    segment.add_argument("-o", "--output", required=True, help="output folder")
+    colour = segment.add_mutually_exclusive_group()
+    colour.add_argument("--hsv", metavar="H1,S1,V1,H2,S2,V2",
+                        help="cable colour range (OpenCV HSV: H 0-179 wrapping, S and V 0-255)")
+    colour.add_argument("--auto", action="store_true",
+                        help="find the cable colour on the reference frame (the default)")
+    segment.add_argument("--reference-frame", type=int, default=0,
+                         help="frame the automatic colour is taken from (default 0)")
+    segment.add_argument("--overwrite", action="store_true", help="replace existing masks")
+    add_settings_arguments(segment, SegmentationSettings)
+    segment.set_defaults(run=_run_segment)
+
+    cameras = commands.add_parser(
+        "cameras", parents=[quiet], help="estimate the cameras with structure from motion (pycolmap)",
+        description="Estimate the cameras of the frames and write a COLMAP text model "
+                    "(image names = file names), upright: the table is z = 0.")
+    cameras.add_argument("images", help="folder of .jpg/.png frames, or a video")
+    cameras.add_argument("-o", "--output", required=True, help="model folder")
+    cameras.add_argument("--overwrite", action="store_true", help="replace an existing model")
+    cameras.set_defaults(run=_run_cameras)
+
+    bench = commands.add_parser(
+        "bench", parents=[quiet], help="measure a stage's accuracy and speed on ground-truth scenes",
+        description="Print a table: one row per ground-truth scene.")
+    bench.add_argument("stage", choices=["segment", "cameras"])
+    bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
+    bench.add_argument("--sample", default="samples/sequence",
+                       help="the realistic sample's folder (skipped if missing)")
+    bench.set_defaults(run=_run_bench)
     return parser
 
 
@@ -51,5 +150,8 @@ def main(argv=None):
     except FileExistsError as error:
         print(f"error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except (Cancelled, KeyboardInterrupt):
+        print("cancelled", file=sys.stderr)
+        return 130
     finally:
         package_log.removeHandler(handler)

@@ -1,0 +1,111 @@
+"""``python -m engine bench STAGE``: accuracy and speed of a stage on ground-truth scenes.
+
+Each bench returns rows (dicts) and :func:`format_table` prints them; nothing here is timed
+inside a test.
+"""
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .ground_truth import read_ground_truth
+from .image_sequence import read_image
+from .segmentation import SegmentationSettings, auto_colour, segment_frame
+from .synthetic_scene import SceneSpec, make_scene
+
+__all__ = ["bench_segment", "junction_scores", "format_table", "DEFAULT_SAMPLE"]
+
+DEFAULT_SAMPLE = Path("samples") / "sequence"
+
+
+def junction_scores(junctions, truth, camera):
+    """Junction recall and stray pixels of one view against the true crossings.
+
+    Returns
+    -------
+    found : int
+        True crossings in front of the camera and inside the frame with a junction pixel
+        within 2 r (projected) of them.
+    visible : int
+        Such crossings.
+    stray : int
+        Junction pixels farther than 3 r (projected) from every true crossing.
+    total : int
+        Junction pixels.
+    """
+    ys, xs = np.nonzero(junctions)
+    pixels = np.column_stack([xs + 0.5, ys + 0.5])
+    near = np.zeros(len(pixels), dtype=bool)
+    found = visible = 0
+    for crossing in truth.crossings:
+        position = truth.crossing_position(crossing)
+        (u, v), depth = camera.project(position)
+        if not (depth > 0 and 0 <= u < camera.width and 0 <= v < camera.height):
+            continue
+        radius = camera.focal[0] * truth.radius / depth
+        distance = np.hypot(pixels[:, 0] - u, pixels[:, 1] - v)
+        visible += 1
+        found += bool((distance <= 2 * radius).any())
+        near |= distance <= 3 * radius
+    return found, visible, int((~near).sum()), len(pixels)
+
+
+def _score_frames(name, images, masks, truth, settings):
+    colour = auto_colour(images[0])
+    ious, found, visible, stray, total = [], 0, 0, 0, 0
+    started = time.perf_counter()
+    for image, mask, camera in zip(images, masks, truth.cameras):
+        segmentation = segment_frame(image, colour, settings)
+        ious.append((segmentation.mask & mask).sum() / max((segmentation.mask | mask).sum(), 1))
+        f, v, s, t = junction_scores(segmentation.junctions, truth, camera)
+        found, visible, stray, total = found + f, visible + v, stray + s, total + t
+    seconds = time.perf_counter() - started
+    return {"scene": name, "frames": len(images), "size": f"{images[0].shape[1]}x"
+            f"{images[0].shape[0]}", "iou_mean": float(np.mean(ious)),
+            "iou_min": float(np.min(ious)),
+            "junction_recall": found / visible if visible else float("nan"),
+            "junction_stray": stray / total if total else 0.0,
+            "ms_per_frame": 1000 * seconds / len(images), "hsv": str(colour)}
+
+
+def bench_segment(*, sample=DEFAULT_SAMPLE, views=30, settings=SegmentationSettings()):
+    """Mask IoU, junction recall and stray junction pixels, time per frame.
+
+    Scenes: the realistic sample (if ``sample`` exists) and fast renders with 3, 6 and 12
+    crossings, a knot and a hanging cable, at 960x720.
+    """
+    import cv2
+
+    rows = []
+    sample = Path(sample)
+    if (sample / "ground_truth.json").is_file():
+        truth = read_ground_truth(sample / "ground_truth.json")
+        images = [read_image(sample / "images" / c.name) for c in truth.cameras]
+        masks = [cv2.imread(str(sample / "masks" / (Path(c.name).stem + ".png")),
+                            cv2.IMREAD_GRAYSCALE) > 0 for c in truth.cameras]
+        rows.append(_score_frames("sample (Cycles)", images, masks, truth, settings))
+    for spec in (SceneSpec(crossings=3, seed=1, views=views),
+                 SceneSpec(crossings=6, seed=2, views=views),
+                 SceneSpec(crossings=12, seed=3, views=views, radius=0.005),
+                 SceneSpec(kind="knot", seed=4, views=views),
+                 SceneSpec(kind="hanging", seed=5, views=views)):
+        scene = make_scene(spec)
+        label = f"{spec.kind} {spec.crossings}" if spec.kind == "table" else spec.kind
+        rows.append(_score_frames(f"fast {label}", list(scene.images), list(scene.masks),
+                                  scene.truth, settings))
+    return rows
+
+
+def format_table(rows, columns=None):
+    """Rows of dicts as a Markdown table (floats with 3 digits)."""
+    columns = columns or list(rows[0])
+
+    def cell(value):
+        if isinstance(value, float):
+            return f"{value:.3f}" if abs(value) < 100 else f"{value:.0f}"
+        return str(value)
+
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(cell(row.get(c, "")) for c in columns) + " |" for row in rows]
+    return "\n".join(lines)

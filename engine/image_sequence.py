@@ -1,0 +1,182 @@
+"""Image sequences: a folder of frames, or a video sampled to frames, checked before any work.
+
+Every problem a user can have with the input gets a one-line :class:`InputError` naming the
+file: a missing or empty folder, a file that is not an image, frames of different sizes.
+"""
+
+import logging
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .colmap_model import natural_key
+from .errors import InputError
+
+__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "ImageSequence", "open_image_sequence",
+           "read_image"]
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm")
+log = logging.getLogger(__name__)
+
+
+def read_image(path):
+    """Read an image file as RGB uint8; :class:`InputError` naming the file if it cannot be."""
+    data = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if data is None:
+        raise InputError(f"{path} cannot be read as an image")
+    return cv2.cvtColor(data, cv2.COLOR_BGR2RGB)
+
+
+@dataclass(frozen=True, eq=False)
+class ImageSequence:
+    """The frames of one capture, all the same size, in order.
+
+    Attributes
+    ----------
+    source : pathlib.Path
+        The folder or video the user gave.
+    paths : tuple of pathlib.Path
+        One image file per frame (for a video: frames extracted into ``work_dir``).
+    width, height : int
+    focal_length_px : float or None
+        Focal length from the frames' EXIF data (35 mm equivalent scaled to the image), if any.
+    work_dir : pathlib.Path or None
+        Where a video's frames were extracted; removed by :meth:`close`.
+    """
+
+    source: Path
+    paths: tuple
+    width: int
+    height: int
+    focal_length_px: float = None
+    work_dir: Path = None
+
+    def __len__(self):
+        return len(self.paths)
+
+    @property
+    def names(self):
+        """Frame file names, as cameras and masks are named."""
+        return tuple(path.name for path in self.paths)
+
+    def read(self, index):
+        """Frame ``index`` as an RGB uint8 array."""
+        return read_image(self.paths[index])
+
+    def close(self):
+        """Remove extracted video frames (a folder of images is left alone)."""
+        if self.work_dir is not None:
+            shutil.rmtree(self.work_dir, ignore_errors=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def _exif_focal_length(path, width, height):
+    """Focal length in pixels from EXIF, through pycolmap's reader; None without EXIF."""
+    try:
+        import pycolmap
+
+        camera = pycolmap.infer_camera_from_image(str(path))
+    except Exception:  # no EXIF reader or unreadable metadata: no prior, not an error
+        return None
+    if not camera.has_prior_focal_length or (camera.width, camera.height) != (width, height):
+        return None
+    return float(camera.mean_focal_length())
+
+
+def _extract_video(video, frames, work_dir):
+    capture = cv2.VideoCapture(str(video))
+    if not capture.isOpened():
+        raise InputError(f"{video} cannot be read as a video")
+    try:
+        count = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+        if count <= 0:
+            raise InputError(f"{video} holds no frames")
+        wanted = np.unique(np.linspace(0, count - 1, min(frames, count)).round().astype(int))
+        paths = []
+        for number in wanted:
+            capture.set(cv2.CAP_PROP_POS_FRAMES, int(number))
+            ok, frame = capture.read()
+            if not ok:
+                continue
+            path = work_dir / f"frame_{number:06d}.jpg"
+            cv2.imwrite(str(path), frame, [cv2.IMWRITE_JPEG_QUALITY, 95])
+            paths.append(path)
+    finally:
+        capture.release()
+    if not paths:
+        raise InputError(f"{video}: no frame could be decoded")
+    return paths
+
+
+def open_image_sequence(source, *, video_frames=40, work_dir=None):
+    """Open a folder of frames (natural order) or a video (sampled evenly) and check it.
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        A folder of .jpg/.jpeg/.png frames, or a video file.
+    video_frames : int, optional
+        How many frames to take from a video.
+    work_dir : str or os.PathLike, optional
+        Where to put a video's frames; a temporary folder (removed by ``close``) if None.
+
+    Returns
+    -------
+    ImageSequence
+
+    Raises
+    ------
+    InputError
+        Missing source, no frames, an unreadable frame, frames of different sizes.
+    """
+    source = Path(source)
+    extracted = None
+    if source.is_file() and source.suffix.lower() in VIDEO_SUFFIXES:
+        if work_dir is None:
+            extracted = Path(tempfile.mkdtemp(prefix="cable_recon_frames_"))
+        else:
+            extracted = Path(work_dir)
+            extracted.mkdir(parents=True, exist_ok=True)
+        try:
+            paths = _extract_video(source, video_frames, extracted)
+        except BaseException:
+            if work_dir is None:
+                shutil.rmtree(extracted, ignore_errors=True)
+            raise
+    elif source.is_dir():
+        paths = sorted((p for p in source.iterdir()
+                        if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
+                       key=lambda p: natural_key(p.name))
+        if not paths:
+            raise InputError(f"{source} holds no .jpg or .png images")
+    elif source.exists():
+        raise InputError(f"{source} is neither a folder of images nor a video "
+                         f"({', '.join(VIDEO_SUFFIXES)})")
+    else:
+        raise InputError(f"{source} does not exist")
+
+    size = None
+    for path in paths:
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise InputError(f"{path} cannot be read as an image")
+        shape = (image.shape[1], image.shape[0])
+        if size is None:
+            size, first = shape, path
+        elif shape != size:
+            raise InputError(f"{path} is {shape[0]}x{shape[1]} but {first.name} is "
+                             f"{size[0]}x{size[1]}: all frames must have the same size")
+    focal = _exif_focal_length(paths[0], *size)
+    log.info("%d frames of %dx%d from %s", len(paths), size[0], size[1], source)
+    return ImageSequence(source=source, paths=tuple(paths), width=size[0], height=size[1],
+                         focal_length_px=focal, work_dir=extracted if work_dir is None else None)

@@ -1,0 +1,53 @@
+"""Command-line flags derived from the engine's settings dataclasses, so defaults never drift."""
+
+import dataclasses
+import re
+
+__all__ = ["add_settings_arguments", "settings_from_arguments"]
+
+
+def _help_texts(cls):
+    """Per field, the first sentence of its numpydoc ``Attributes`` entry."""
+    entries, current = {}, None
+    for line in (cls.__doc__ or "").splitlines():
+        if re.match(r"^    \w+(, \w+)* : ", line):
+            current = re.findall(r"\w+", line.split(" : ")[0])
+            for name in current:
+                entries[name] = []
+        elif current and line.startswith("        ") and line.strip():
+            for name in current:
+                entries[name].append(line.strip())
+        elif not line.strip():
+            current = None
+    texts = {}
+    for name, lines in entries.items():
+        text = " ".join(lines).replace("``", "")
+        texts[name] = text.split(". ")[0].rstrip(".") + "."
+    return texts
+
+
+def add_settings_arguments(parser, cls, *, skip=()):
+    """Add ``--field-name`` for every int/float/bool field of the dataclass ``cls``."""
+    group = parser.add_argument_group(cls.__name__)
+    texts = _help_texts(cls)
+    for field in dataclasses.fields(cls):
+        if field.name in skip or field.type not in (int, float, bool, "int", "float", "bool"):
+            continue
+        flag = "--" + field.name.replace("_", "-")
+        kind = {"int": int, "float": float, "bool": bool}.get(field.type, field.type)
+        if kind is bool:  # a flag that changes the default
+            flag = flag if not field.default else "--no-" + field.name.replace("_", "-")
+            group.add_argument(flag, dest=field.name, default=field.default,
+                               action="store_false" if field.default else "store_true",
+                               help=("turn off: " if field.default else "")
+                               + texts.get(field.name, ""))
+            continue
+        group.add_argument(flag, dest=field.name, type=kind, default=field.default,
+                           metavar=field.name.upper(),
+                           help=f"{texts.get(field.name, '')} (default {field.default})")
+
+
+def settings_from_arguments(cls, args):
+    """Build ``cls`` from parsed arguments named after its fields."""
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{name: value for name, value in vars(args).items() if name in names})

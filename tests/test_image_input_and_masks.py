@@ -1,0 +1,163 @@
+"""Image sequences in, cable masks and junction maps out (paper §3.1)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from engine import InputError
+from engine.image_sequence import open_image_sequence, read_image
+from engine.segmentation import (ColourRange, SegmentationSettings, auto_colour, cable_mask,
+                                 cable_width, colour_at, junction_map, segment_frame)
+from engine.synthetic_scene import SceneSpec, make_scene
+
+
+def iou(a, b):
+    return (a & b).sum() / max((a | b).sum(), 1)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_scene(SceneSpec(crossings=3, seed=4, views=10, width=640, height=480))
+
+
+def write_frames(folder, images, names=None):
+    folder.mkdir(parents=True, exist_ok=True)
+    names = names or [f"frame{k}.png" for k in range(len(images))]
+    for name, image in zip(names, images):
+        cv2.imwrite(str(folder / name), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    return folder
+
+
+# -- image sequences ------------------------------------------------------------------------
+
+def test_folder_in_natural_order(tmp_path, scene):
+    names = ["frame10.png", "frame2.png", "frame1.jpg"]
+    write_frames(tmp_path / "f", scene.images[:3], names)
+    (tmp_path / "f" / "notes.txt").write_text("not a frame")
+    sequence = open_image_sequence(tmp_path / "f")
+    assert sequence.names == ("frame1.jpg", "frame2.png", "frame10.png")
+    assert (sequence.width, sequence.height) == (640, 480) and len(sequence) == 3
+    np.testing.assert_array_equal(sequence.read(1), read_image(tmp_path / "f" / "frame2.png"))
+
+
+def test_video_is_sampled_to_frames(tmp_path, scene):
+    video = tmp_path / "clip.mp4"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"mp4v"), 10, (640, 480))
+    for image in scene.images:
+        writer.write(cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    writer.release()
+    with open_image_sequence(video, video_frames=4) as sequence:
+        assert len(sequence) == 4 and (sequence.width, sequence.height) == (640, 480)
+        first = sequence.read(0)
+        assert np.abs(first.astype(int) - scene.images[0]).mean() < 8  # the first frame
+        folder = sequence.work_dir
+        assert folder.is_dir()
+    assert not folder.exists()  # extracted frames are cleaned up
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda d: d / "missing", "does not exist"),
+    (lambda d: d.mkdir() or d, "holds no .jpg or .png images"),
+    (lambda d: (d.mkdir(), (d / "a.png").write_bytes(b"not a png"))[0] or d,
+     r"a.png cannot be read as an image"),
+    (lambda d: (d.with_suffix(".txt").write_text("hello"), d.with_suffix(".txt"))[1],
+     "neither a folder of images nor a video"),
+])
+def test_bad_input_is_named(tmp_path, make, message):
+    source = make(tmp_path / "frames")
+    with pytest.raises(InputError, match=message) as info:
+        open_image_sequence(source)
+    assert "\n" not in str(info.value)
+
+
+def test_mixed_sizes_are_refused(tmp_path, scene):
+    folder = write_frames(tmp_path / "f", scene.images[:2])
+    cv2.imwrite(str(folder / "frame2.png"), np.zeros((100, 120, 3), np.uint8))
+    with pytest.raises(InputError, match=r"frame2.png is 120x100 but frame0.png is 640x480"):
+        open_image_sequence(folder)
+
+
+# -- colours and masks ----------------------------------------------------------------------
+
+def test_hue_ranges_wrap_around_red():
+    red = ColourRange((170, 100, 50), (8, 255, 255))
+    hsv = np.array([[[175, 200, 200], [3, 200, 200], [90, 200, 200], [3, 50, 200]]], np.uint8)
+    assert red.select(hsv).tolist() == [[True, True, False, False]]
+    assert str(ColourRange.parse("170,100,50,8,255,255")) == "170,100,50,8,255,255"
+    with pytest.raises(InputError, match="six numbers"):
+        ColourRange.parse("1,2,3")
+    with pytest.raises(InputError, match="0..179"):
+        ColourRange.parse("200,0,0,10,255,255")
+
+
+def test_automatic_colour_finds_the_cable(scene):
+    colour = auto_colour(scene.images[0])
+    assert colour.low[0] > colour.high[0]  # a red cable: the hue range wraps
+    scores = [iou(cable_mask(image, colour)[0], truth)
+              for image, truth in zip(scene.images, scene.masks)]
+    assert np.mean(scores) > 0.9 and min(scores) > 0.85
+
+
+def test_picked_pixel_gives_the_cable_colour(scene):
+    rows, cols = np.nonzero(scene.masks[0])
+    centre = len(rows) // 2
+    colour = colour_at(scene.images[0], int(cols[centre]), int(rows[centre]))
+    assert iou(cable_mask(scene.images[0], colour)[0], scene.masks[0]) > 0.8
+    with pytest.raises(ValueError, match="outside"):
+        colour_at(scene.images[0], 10_000, 0)
+
+
+def test_dark_cable_on_a_light_table():
+    image = np.full((200, 300, 3), 215, np.uint8)
+    image += np.random.default_rng(0).integers(0, 20, image.shape, dtype=np.uint8)
+    truth = np.zeros((200, 300), np.uint8)
+    cv2.polylines(truth, [np.array([[20, 40], [150, 170], [280, 30]], np.int32)], False, 1, 9)
+    image[truth > 0] = 30
+    colour = auto_colour(image)
+    assert colour.high[2] < 128 and colour.low[1] == 0  # a brightness range, not a hue
+    mask, width = cable_mask(image, colour)
+    assert iou(mask, truth > 0) > 0.9
+    assert width == pytest.approx(cable_width(truth > 0), abs=0.5)
+
+
+@pytest.mark.parametrize("thickness", [4, 5, 8, 9])
+def test_width_of_even_and_odd_bands(thickness):
+    band = np.zeros((120, 200), np.uint8)
+    band[50:50 + thickness, 10:190] = 1
+    assert cable_width(band > 0) == pytest.approx(thickness, abs=0.6)
+    assert cable_width(np.zeros((5, 5), bool)) == 0.0
+
+
+def test_specks_are_removed():
+    image = np.full((200, 200, 3), (150, 130, 110), np.uint8)
+    cv2.line(image, (10, 100), (190, 100), (210, 30, 30), 9)
+    image[20:23, 20:23] = (210, 30, 30)  # a red fleck on the table
+    mask, _ = cable_mask(image, ColourRange((170, 120, 50), (10, 255, 255)))
+    assert not mask[20:23, 20:23].any() and mask[100, 100]
+
+
+def test_junctions_at_an_x_not_along_strands():
+    mask = np.zeros((240, 240), np.uint8)
+    cv2.line(mask, (20, 20), (220, 220), 1, 10)
+    cv2.line(mask, (20, 220), (220, 20), 1, 10)
+    cv2.line(mask, (90, 12), (150, 12), 1, 10)  # a lone strand far from the crossing
+    junctions = junction_map(mask > 0, cable_width(mask > 0))
+    ys, xs = np.nonzero(junctions)
+    assert len(ys) > 0
+    assert np.hypot(xs - 120, ys - 120).max() < 25  # only around the crossing
+    assert not junctions[:30, 80:160].any()
+
+
+def test_junctions_at_the_crossings_of_a_scene(scene):
+    colour = auto_colour(scene.images[0])
+    camera, truth = scene.cameras[0], scene.truth
+    segmentation = segment_frame(scene.images[0], colour)
+    ys, xs = np.nonzero(segmentation.junctions)
+    for crossing in truth.crossings:
+        u, v = camera.project(truth.crossing_position(crossing))[0]
+        radius = camera.focal[0] * truth.radius / camera.world_to_camera(
+            truth.crossing_position(crossing)[None])[0, 2]
+        assert (np.hypot(xs + 0.5 - u, ys + 0.5 - v) < 2 * radius).any()
+    assert segmentation.width == pytest.approx(
+        2 * camera.focal[0] * truth.radius / np.median(camera.world_to_camera(
+            truth.centreline)[:, 2]), rel=0.2)

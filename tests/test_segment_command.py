@@ -1,0 +1,90 @@
+"""`python -m engine segment` and the segmentation bench's scoring."""
+
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from engine.benchmarks import format_table, junction_scores
+from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+
+
+@pytest.fixture(scope="module")
+def scene_folder(tmp_path_factory):
+    scene = make_scene(SceneSpec(crossings=3, seed=6, views=10, width=480, height=360))
+    return write_scene(scene, tmp_path_factory.mktemp("scene") / "s"), scene
+
+
+def run_engine(*args):
+    return subprocess.run([sys.executable, "-m", "engine", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_segment_writes_masks_junctions_and_a_contact_sheet(scene_folder, tmp_path):
+    folder, scene = scene_folder
+    run = run_engine("segment", folder / "images", "-o", tmp_path / "out")
+    assert run.returncode == 0, run.stderr
+    assert "100%" in run.stderr and "--hsv" in run.stderr
+    for camera, truth in zip(scene.cameras, scene.masks):
+        stem = camera.name.rsplit(".", 1)[0] + ".png"
+        mask = cv2.imread(str(tmp_path / "out" / "masks" / stem), cv2.IMREAD_GRAYSCALE)
+        assert set(np.unique(mask)) <= {0, 255}
+        assert ((mask > 0) & truth).sum() / ((mask > 0) | truth).sum() > 0.85
+        junctions = cv2.imread(str(tmp_path / "out" / "junctions" / stem), cv2.IMREAD_GRAYSCALE)
+        assert junctions.shape == mask.shape and not (junctions > mask).any()
+    assert cv2.imread(str(tmp_path / "out" / "contact_sheet.png")) is not None
+    again = run_engine("segment", folder / "images", "-o", tmp_path / "out")
+    assert again.returncode == 2 and "already holds masks" in again.stderr
+    assert run_engine("segment", folder / "images", "-o", tmp_path / "out",
+                      "--overwrite", "-q").returncode == 0
+
+
+def test_segment_with_a_given_colour_and_bad_colours(scene_folder, tmp_path):
+    folder, _ = scene_folder
+    run = run_engine("segment", folder / "images", "-o", tmp_path / "a",
+                     "--hsv", "170,100,40,10,255,255")
+    assert run.returncode == 0, run.stderr
+    bad = run_engine("segment", folder / "images", "-o", tmp_path / "b", "--hsv", "1,2,3")
+    assert bad.returncode == 2 and bad.stderr.strip().startswith("error: --hsv")
+
+
+def test_a_frame_without_cable_is_named(scene_folder, tmp_path):
+    folder, _ = scene_folder
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for path in sorted((folder / "images").iterdir())[:3]:
+        (frames / path.name).write_bytes(path.read_bytes())
+    table_only = cv2.imread(str(frames / "000.png"))
+    table_only[:] = cv2.GaussianBlur(table_only, (0, 0), 3)
+    table_only[..., 2] = table_only[..., 1]  # no red left anywhere
+    cv2.imwrite(str(frames / "009.png"), table_only)
+    run = run_engine("segment", frames, "-o", tmp_path / "out")
+    assert run.returncode == 2
+    assert "no cable pixels in 009.png" in run.stderr.splitlines()[-1]
+
+
+def test_missing_folder_exits_2(tmp_path):
+    run = run_engine("segment", tmp_path / "nowhere", "-o", tmp_path / "out")
+    assert run.returncode == 2 and "does not exist" in run.stderr
+
+
+def test_junction_scores_count_found_and_stray(scene_folder):
+    _, scene = scene_folder
+    truth, camera = scene.truth, scene.cameras[0]
+    junctions = np.zeros((camera.height, camera.width), bool)
+    for crossing in truth.crossings:
+        u, v = camera.project(truth.crossing_position(crossing))[0]
+        junctions[int(v), int(u)] = True
+    found, visible, stray, total = junction_scores(junctions, truth, camera)
+    assert found == visible == len(truth.crossings) and stray == 0 and total == 3
+    junctions[:] = False
+    junctions[0, 0] = True
+    assert junction_scores(junctions, truth, camera) == (0, 3, 1, 1)
+
+
+def test_format_table():
+    table = format_table([{"scene": "a", "iou": 0.91234, "n": 3}])
+    assert table.splitlines() == ["| scene | iou | n |", "|---|---|---|", "| a | 0.912 | 3 |"]
