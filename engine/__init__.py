@@ -8,7 +8,6 @@ from .camera import CAMERA_MODELS, Camera
 from .colmap_model import ColmapModel, read_colmap_model, write_colmap_model
 from .errors import Cancelled, InputError, ReconstructionError
 from .ground_truth import GroundTruth, TrueCrossing, read_ground_truth, write_ground_truth
-from .metrics import Metrics, align_result_to_truth, evaluate
 from .result import (RESULT_FORMAT, CablePath, Crossing, Result, StrandRef, read_result,
                      write_result)
 
@@ -21,3 +20,13 @@ __all__ = [
     "GroundTruth", "TrueCrossing", "read_ground_truth", "write_ground_truth", "Metrics",
     "align_result_to_truth", "evaluate",
 ]
+
+_LAZY = {"Metrics", "align_result_to_truth", "evaluate"}  # scipy: not needed to import results
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        from . import metrics
+
+        return getattr(metrics, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

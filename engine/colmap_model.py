@@ -98,8 +98,6 @@ def read_colmap_model(folder):
         The folder is missing, holds no model, the model is malformed, uses a camera model
         that is not supported, or registers no image. The message names the folder.
     """
-    import pycolmap
-
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"COLMAP model folder {folder} does not exist")

@@ -105,13 +105,6 @@ class GroundTruth:
         return GroundTruth(self.centreline, self.radius, self.crossings, self.closed,
                            tuple(cameras), self.kind, self.up)
 
-    def scaled(self, factor):
-        """The same scene with every length multiplied by ``factor`` (cameras included)."""
-        cameras = tuple(Camera(c.name, c.width, c.height, c.model, c.params, c.R, c.t * factor)
-                        for c in self.cameras)
-        return GroundTruth(self.centreline * factor, self.radius * factor, self.crossings,
-                           self.closed, cameras, self.kind, self.up)
-
     def as_result(self, units="m"):
         """The truth as a perfect reconstruction result (crossings with confidence 1)."""
         crossings = tuple(Crossing(self.crossing_position(c), StrandRef(0, c.over),

@@ -8,7 +8,7 @@ import numpy as np
 
 from .errors import InputError
 from .image_sequence import open_image_sequence
-from .segmentation import ColourRange, SegmentationSettings, auto_colour, segment_frame
+from .segmentation import SegmentationSettings, auto_colour, segment_frame
 
 __all__ = ["segment_sequence_to_folder", "contact_sheet"]
 

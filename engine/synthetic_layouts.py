@@ -21,7 +21,6 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
@@ -80,18 +79,6 @@ def _arc_resample(points, spacing, closed=False):
     targets = np.linspace(0.0, arc[-1], count + (0 if closed else 1), endpoint=not closed)
     return np.column_stack([np.interp(targets, arc, points[:, k])
                             for k in range(points.shape[1])])
-
-
-def _spline_through(controls, closed):
-    """Cubic spline through control points, densely sampled at ``SAMPLE_SPACING``."""
-    if closed:
-        controls = np.vstack([controls, controls[:1]])
-    chord = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(controls, axis=0), axis=1))])
-    spline = make_interp_spline(chord, controls, k=3, bc_type="periodic" if closed else None)
-    dense = spline(np.linspace(0.0, chord[-1], int(chord[-1] / (SAMPLE_SPACING / 4)) + 2))
-    if closed:
-        dense = dense[:-1]
-    return _arc_resample(dense, SAMPLE_SPACING, closed)
 
 
 def _segments(points, closed):
@@ -396,7 +383,6 @@ def table_layout(crossings, *, seed=0, radius=0.004, extent=None, closed=False,
     rng = np.random.default_rng([seed, crossings, int(closed), 7])
     bound = 0.5 * extent / radius - settings.clearance
     min_length = 1.2 * extent / radius
-    spacing = settings.min_crossing_spacing
     length = min_length + 60.0 * crossings
     max_length = 3.0 * length
     for _ in range(settings.max_tries):

@@ -49,7 +49,6 @@ def small_result():
 @pytest.fixture(scope="session")
 def addon():
     """The checkout registered as the add-on in this process's bpy (not via the installer)."""
-    import bpy
     from blender_package import load_addon_package
 
     package = load_addon_package()

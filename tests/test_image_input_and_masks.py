@@ -6,8 +6,8 @@ import pytest
 
 from engine import InputError
 from engine.image_sequence import open_image_sequence, read_image
-from engine.segmentation import (ColourRange, SegmentationSettings, auto_colour, cable_mask,
-                                 cable_width, colour_at, junction_map, segment_frame)
+from engine.segmentation import (ColourRange, auto_colour, cable_mask, cable_width, colour_at,
+                                 junction_map, segment_frame)
 from engine.synthetic_scene import SceneSpec, make_scene
 
 

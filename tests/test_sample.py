@@ -6,7 +6,6 @@ import sys
 
 import cv2
 import numpy as np
-import pytest
 
 from conftest import ROOT
 from engine import read_colmap_model

@@ -15,7 +15,7 @@ from engine.result import CablePath, Result
 from engine.synthetic_cameras import cable_pixel_width, handheld_cameras, orbit_cameras
 from engine.synthetic_layouts import (LayoutSettings, find_crossings_2d, hanging_layout,
                                       knot_layout, table_layout)
-from engine.synthetic_render import render_masks, render_views
+from engine.synthetic_render import render_masks
 from engine.synthetic_scene import SceneSpec, make_scene, write_scene
 
 RULES = LayoutSettings()
