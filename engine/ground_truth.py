@@ -100,6 +100,33 @@ class GroundTruth:
         """Midpoint of the two strands at ``crossing``."""
         return 0.5 * (self.centreline[crossing.over] + self.centreline[crossing.under])
 
+    def crossing_in_view(self, crossing, camera, *, reach=4.0):
+        """Where the two strands of ``crossing`` meet in ``camera``'s image.
+
+        The projected 3D midpoint is not where a view sees the strands cross: the upper strand
+        lies 2 r higher, so in an oblique view its image slides along the lower one. This is
+        the point where the two projected centrelines come closest, within ``reach`` radii of
+        arc length of the crossing on each strand.
+
+        Returns
+        -------
+        pixel : ndarray, shape (2,)
+            COLMAP image coordinates (NaN if the crossing is behind the camera).
+        depth : float
+        """
+        arc = self.arc_length
+        strands = []
+        for index in (crossing.over, crossing.under):
+            near = np.abs(arc - arc[index]) <= reach * self.radius
+            pixels, depths = camera.project(self.centreline[near])
+            strands.append((pixels, depths))
+        (over, over_depth), (under, under_depth) = strands
+        if not (np.all(over_depth > 0) and np.all(under_depth > 0)):
+            return np.full(2, np.nan), float("nan")
+        distance = np.linalg.norm(over[:, None, :] - under[None, :, :], axis=2)
+        i, j = np.unravel_index(np.argmin(distance), distance.shape)
+        return 0.5 * (over[i] + under[j]), float(0.5 * (over_depth[i] + under_depth[j]))
+
     def with_cameras(self, cameras):
         """A copy with ``cameras`` as the scene's views."""
         return GroundTruth(self.centreline, self.radius, self.crossings, self.closed,
