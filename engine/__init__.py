@@ -13,20 +13,32 @@ from .result import (RESULT_FORMAT, CablePath, Crossing, Result, StrandRef, read
 
 __version__ = "0.1.0"
 
+#: Stage APIs, imported on first use (scipy, OpenCV and pycolmap are not needed to read a
+#: result): name -> module.
+_LAZY = {
+    "Metrics": "metrics", "align_result_to_truth": "metrics", "evaluate": "metrics",
+    "SegmentationSettings": "segmentation", "segment_frame": "segmentation",
+    "auto_colour": "segmentation", "ColourRange": "segmentation",
+    "CameraEstimationSettings": "camera_estimation", "estimate_cameras": "camera_estimation",
+    "CarvingSettings": "carving", "VoxelGrid": "carving", "carve": "carving",
+    "SegmentGraphSettings": "segment_graph", "SegmentGraph": "segment_graph",
+    "extract_segment_graph": "segment_graph",
+    "RodSettings": "rod", "Rod": "rod", "solve_rod": "rod",
+    "RodFitSettings": "rod_fit", "RodFit": "rod_fit", "fit_rod": "rod_fit",
+    "ImageEvidence": "rod_fit", "Contact": "rod_fit", "Voxels": "rod_fit",
+}
+
 __all__ = [
     "__version__", "CAMERA_MODELS", "Camera", "ColmapModel", "read_colmap_model",
     "write_colmap_model", "Cancelled", "InputError", "ReconstructionError", "RESULT_FORMAT",
     "CablePath", "Crossing", "Result", "StrandRef", "read_result", "write_result",
-    "GroundTruth", "TrueCrossing", "read_ground_truth", "write_ground_truth", "Metrics",
-    "align_result_to_truth", "evaluate",
+    "GroundTruth", "TrueCrossing", "read_ground_truth", "write_ground_truth", *_LAZY,
 ]
-
-_LAZY = {"Metrics", "align_result_to_truth", "evaluate"}  # scipy: not needed to import results
 
 
 def __getattr__(name):
     if name in _LAZY:
-        from . import metrics
+        from importlib import import_module
 
-        return getattr(metrics, name)
+        return getattr(import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

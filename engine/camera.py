@@ -153,9 +153,19 @@ class Camera:
         single = points.ndim == 1
         cam = self.world_to_camera(points.reshape(-1, 3))
         depth = cam[:, 2]
+        pixels = np.stack(self.image_coordinates(cam[:, 0], cam[:, 1], depth), axis=1)
+        if single:
+            return pixels[0], depth[0]
+        return pixels, depth
+
+    def image_coordinates(self, x, y, z):
+        """Image coordinates ``(u, v)`` of points given in the camera frame, distortion included.
+
+        Works on arrays of any float dtype (float32 keeps it); NaN where ``z <= 0``.
+        """
         with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.where(depth > 0, cam[:, 0] / depth, np.nan)
-            v = np.where(depth > 0, cam[:, 1] / depth, np.nan)
+            u = np.where(z > 0, x / z, np.nan).astype(x.dtype, copy=False)
+            v = np.where(z > 0, y / z, np.nan).astype(x.dtype, copy=False)
         k1, k2, p1, p2 = self.distortion
         if k1 or k2 or p1 or p2:
             r2 = u * u + v * v
@@ -164,10 +174,7 @@ class Camera:
             dv = v * radial + 2.0 * p2 * u * v + p1 * (r2 + 2.0 * v * v)
             u, v = u + du, v + dv
         (fx, fy), (cx, cy) = self.focal, self.principal_point
-        pixels = np.stack([fx * u + cx, fy * v + cy], axis=1)
-        if single:
-            return pixels[0], depth[0]
-        return pixels, depth
+        return (fx * u + cx).astype(x.dtype, copy=False), (fy * v + cy).astype(x.dtype, copy=False)
 
     # -- serialisation ----------------------------------------------------------------------
     def to_dict(self):

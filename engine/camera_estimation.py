@@ -37,6 +37,7 @@ import numpy as np
 from .camera import CAMERA_MODELS, Camera
 from .colmap_model import natural_key, write_colmap_model
 from .errors import Cancelled, InputError, ReconstructionError
+from .progress import StageProgress, check_cancel
 from .image_sequence import open_image_sequence
 from .metrics import Similarity
 from .upright import UprightSettings, look_at_point, make_upright
@@ -190,21 +191,8 @@ class CameraEstimate:
 
 # -- plumbing ------------------------------------------------------------------------------------
 
-class _Stage:
-    """Maps a stage's own 0..1 progress into its slice of the overall 0..1."""
-
-    def __init__(self, progress, start, stop):
-        self.progress, self.start, self.stop = progress, start, stop
-
-    def __call__(self, fraction, message):
-        if self.progress is not None:
-            fraction = min(max(fraction, 0.0), 1.0)
-            self.progress(self.start + (self.stop - self.start) * fraction, message)
-
-
 def _check(cancel):
-    if cancel is not None and cancel.is_set():
-        raise Cancelled("camera estimation was cancelled")
+    check_cancel(cancel, "camera estimation")
 
 
 @contextlib.contextmanager
@@ -496,19 +484,19 @@ def _estimate(folder, names, work, settings, focal_length_px, progress, cancel, 
 
     clock = time.perf_counter()
     _extract(database, folder, names, settings, focal_length_px, token, cancel,
-             _Stage(progress, 0.0, 0.4))
+             StageProgress(progress, 0.0, 0.4))
     timings["features"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
     sequential = _sequential_pairs(total, int(settings.sequential_overlap),
                                    bool(settings.quadratic_overlap))
     _match(database, work, names, sequential, settings, token, cancel,
-           _Stage(progress, 0.4, 0.55), "sequential")
+           StageProgress(progress, 0.4, 0.55), "sequential")
     timings["matching"] = time.perf_counter() - clock
 
     clock = time.perf_counter()
     best = _map(database, folder, work, total, settings, token, cancel,
-                _Stage(progress, 0.55, 0.8), "sequential")
+                StageProgress(progress, 0.55, 0.8), "sequential")
     timings["mapping"] = time.perf_counter() - clock
     matching = "sequential"
     registered = 0 if best is None else best.num_reg_images()
@@ -520,10 +508,10 @@ def _estimate(folder, names, work, settings, focal_length_px, progress, cancel, 
         done = set(sequential)
         rest = [(i, j) for i in range(total) for j in range(i + 1, total) if (i, j) not in done]
         _match(database, work, names, rest, settings, token, cancel,
-               _Stage(progress, 0.8, 0.88), "exhaustive")
+               StageProgress(progress, 0.8, 0.88), "exhaustive")
         pycolmap.set_random_seed(int(settings.seed))
         again = _map(database, folder, work, total, settings, token, cancel,
-                     _Stage(progress, 0.88, 0.97), "exhaustive")
+                     StageProgress(progress, 0.88, 0.97), "exhaustive")
         timings["exhaustive"] = time.perf_counter() - clock
         if again is not None and again.num_reg_images() > registered:
             best, registered, matching = again, again.num_reg_images(), "exhaustive"

@@ -67,10 +67,18 @@ def _run_bench(args):
 
     if args.stage == "segment":
         rows = bench_segment(sample=args.sample, views=args.views)
-    else:
+    elif args.stage == "cameras":
         from .camera_estimation import bench_cameras
 
         rows = bench_cameras(views=args.views, include_sample=True)
+    elif args.stage == "carve":
+        from .carving_benchmark import bench_carve
+
+        rows = bench_carve(views=args.views)
+    else:
+        from .rod_benchmark import bench_rod
+
+        rows = bench_rod()
     print(format_table(rows))
 
 
@@ -119,7 +127,7 @@ def build_parser():
     bench = commands.add_parser(
         "bench", parents=[quiet], help="measure a stage's accuracy and speed on ground-truth scenes",
         description="Print a table: one row per ground-truth scene.")
-    bench.add_argument("stage", choices=["segment", "cameras"])
+    bench.add_argument("stage", choices=["segment", "cameras", "carve", "rod"])
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")

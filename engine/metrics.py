@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 from .camera import Camera
 from .ground_truth import GroundTruth
 from .result import CablePath, Crossing, Result
+from .validation import as_points
 
 __all__ = ["MetricSettings", "Similarity", "CrossingCheck", "Metrics", "align_similarity",
            "align_result_to_truth", "evaluate"]
@@ -157,15 +158,6 @@ class Similarity:
                       rotation, translation)
 
 
-def _as_points(value, name):
-    points = np.asarray(value, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"{name} must be an (N, 3) array, got shape {points.shape}")
-    if not np.all(np.isfinite(points)):
-        raise ValueError(f"{name} holds a value that is not a finite number")
-    return points
-
-
 def _collinear(centred):
     singular = np.linalg.svd(centred, compute_uv=False)
     return singular[0] == 0 or singular[1] <= 1e-9 * singular[0]
@@ -190,8 +182,8 @@ def align_similarity(source_points, target_points):
     ValueError
         Shapes differ, fewer than 3 points, or the points are collinear.
     """
-    source = _as_points(source_points, "source_points")
-    target = _as_points(target_points, "target_points")
+    source = as_points(source_points, "source_points")
+    target = as_points(target_points, "target_points")
     if source.shape != target.shape:
         raise ValueError(f"source_points {source.shape} and target_points {target.shape} "
                          "must have the same shape")

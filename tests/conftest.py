@@ -64,3 +64,13 @@ def empty_scene(addon):
 
     bpy.ops.wm.read_homefile(use_empty=True)
     return bpy.context.scene
+
+
+def finite_gradient(energy, points, step=1e-6):
+    """Central-difference gradient of ``energy`` at ``points`` (any shape)."""
+    gradient = np.zeros_like(points)
+    for index in np.ndindex(points.shape):
+        delta = np.zeros_like(points)
+        delta[index] = step
+        gradient[index] = (energy(points + delta) - energy(points - delta)) / (2 * step)
+    return gradient

@@ -1,0 +1,119 @@
+"""Voxel carving (§3.2) on ground-truth scenes: coarse to fine is exact, the hull holds the cable."""
+
+import threading
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from engine import Cancelled
+from engine.carving import CarvingSettings, carve, scene_region
+from engine.segmentation import cable_width, junction_map
+from engine.synthetic_scene import SceneSpec, make_scene
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """12 views at 480x360 of a 2-crossing table scene with its exact masks and junctions."""
+    scene = make_scene(SceneSpec(crossings=2, seed=3, views=12, width=480, height=360,
+                                 radius=0.006))
+    junctions = [junction_map(mask, cable_width(mask)) for mask in scene.masks]
+    return scene, junctions
+
+
+@pytest.fixture(scope="module")
+def grid(scene):
+    scene, junctions = scene
+    return carve(scene.cameras, scene.masks, junctions)
+
+
+def _occupied_world(grid):
+    return {tuple(np.round(p / grid.voxel_size).astype(int)) for p in grid.occupied_points()}
+
+
+def test_coarse_to_fine_equals_a_full_carve(scene):
+    scene, _ = scene
+    truth = scene.truth
+    lower = truth.centreline.min(axis=0) - 12 * truth.radius
+    side = float((truth.centreline.max(axis=0) - lower).max() + 12 * truth.radius)
+    settings = CarvingSettings(voxels_per_radius=1.5, root_cells=4, min_piece_length=0.0)
+    coarse = carve(scene.cameras, scene.masks, radius=truth.radius, region=(lower, side),
+                   settings=settings)
+    full = carve(scene.cameras, scene.masks, radius=truth.radius, region=(lower, side),
+                 settings=CarvingSettings(voxels_per_radius=1.5, root_cells=4,
+                                          min_piece_length=0.0, coarse_to_fine=False))
+    # the same whether the distance maps are kept between levels or not, on any thread count
+    again = carve(scene.cameras, scene.masks, radius=truth.radius, region=(lower, side),
+                  settings=replace(settings, cache_mb=0.0, threads=1))
+    np.testing.assert_array_equal(again.occupied, coarse.occupied)
+    assert coarse.voxel_size == pytest.approx(full.voxel_size)
+    assert coarse.occupied.sum() > 1000
+    assert coarse.shape == full.shape
+    np.testing.assert_allclose(coarse.origin, full.origin, atol=1e-12)
+    np.testing.assert_array_equal(coarse.occupied, full.occupied)
+    np.testing.assert_array_equal(coarse.visible, full.visible)
+
+
+def test_the_hull_holds_the_whole_cable_and_is_fat(scene, grid):
+    scene, _ = scene
+    truth = scene.truth
+    assert grid.radius == pytest.approx(truth.radius, rel=0.1)
+    assert grid.voxel_size == pytest.approx(grid.radius / CarvingSettings().voxels_per_radius)
+    points = grid.occupied_points()
+    # every point of the true centreline is inside the hull (within half a voxel diagonal)
+    gap, _ = cKDTree(points).query(truth.centreline)
+    assert gap.max() <= 0.87 * grid.voxel_size
+    # and the hull hugs the cable: fat (a visual hull, tall where views look along the cable)
+    # but not a box
+    distance, _ = cKDTree(truth.centreline).query(points)
+    assert 0.5 * truth.radius < np.median(distance) < 4 * truth.radius
+    assert np.percentile(distance, 90) < 15 * truth.radius
+
+
+def test_junction_voxels_sit_at_the_crossings(scene, grid):
+    scene, _ = scene
+    truth = scene.truth
+    junctions = grid.centres(np.argwhere(grid.junction))
+    assert (grid.junction <= grid.occupied).all()
+    crossings = np.array([truth.crossing_position(c) for c in truth.crossings])
+    near, _ = cKDTree(junctions).query(crossings)
+    assert near.max() < 2 * truth.radius  # every crossing has junction voxels
+    far, _ = cKDTree(crossings).query(junctions)
+    assert np.mean(far > 6 * truth.radius) < 0.05  # and they are nowhere else
+
+
+def test_masks_can_be_loaded_lazily(scene, grid):
+    scene, junctions = scene
+    lazy = carve(scene.cameras, [lambda m=m: m for m in scene.masks],
+                 [lambda j=j: j for j in junctions])
+    np.testing.assert_array_equal(lazy.occupied, grid.occupied)
+    np.testing.assert_array_equal(lazy.junction, grid.junction)
+
+
+def test_the_region_comes_from_the_cameras(scene):
+    scene, _ = scene
+    lower, side = scene_region(scene.cameras)
+    points = scene.truth.centreline
+    assert (points >= lower).all() and (points <= lower + side).all()
+
+
+def test_bad_input_and_cancel(scene):
+    scene, _ = scene
+    with pytest.raises(ValueError, match="masks for"):
+        carve(scene.cameras, scene.masks[:-1])
+    with pytest.raises(ValueError, match="is 10x10, its image 480x360"):
+        carve(scene.cameras, [np.zeros((10, 10), bool)] * len(scene.cameras))
+    with pytest.raises(ValueError, match="no view shows the cable"):
+        carve(scene.cameras, [np.zeros((360, 480), bool)] * len(scene.cameras))
+    cancel = threading.Event()
+    calls = []
+
+    def progress(fraction, message):
+        calls.append(fraction)
+        if fraction > 0.3:
+            cancel.set()
+
+    with pytest.raises(Cancelled):
+        carve(scene.cameras, scene.masks, progress=progress, cancel=cancel)
+    assert calls and max(calls) < 0.6
