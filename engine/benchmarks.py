@@ -4,6 +4,8 @@ Each bench returns rows (dicts) and :func:`format_table` prints them; nothing he
 inside a test.
 """
 
+import multiprocessing
+import resource
 import time
 from pathlib import Path
 
@@ -14,7 +16,8 @@ from .image_sequence import read_image
 from .segmentation import SegmentationSettings, auto_colour, segment_frame
 from .synthetic_scene import SceneSpec, make_scene
 
-__all__ = ["bench_segment", "junction_scores", "format_table", "DEFAULT_SAMPLE"]
+__all__ = ["bench_segment", "junction_scores", "format_table", "in_fresh_process",
+           "DEFAULT_SAMPLE"]
 
 DEFAULT_SAMPLE = Path("samples") / "sequence"
 
@@ -122,3 +125,29 @@ def format_table(rows, columns=None):
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += ["| " + " | ".join(cell(row.get(c, "")) for c in columns) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def _measured(function, args):
+    """Run ``function(*args)`` (returning a dict) and add the process's peak memory to it."""
+    try:  # a spawned process starts with its parent's peak: forget it (Linux)
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        pass
+    row = function(*args)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                peak = int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    row["peak_mb"] = peak
+    return row
+
+
+def in_fresh_process(function, *args):
+    """``function(*args)`` (a dict) run in a new process, with ``peak_mb`` (its peak resident
+    memory, interpreter and libraries included) added."""
+    context = multiprocessing.get_context("spawn")
+    with context.Pool(1, maxtasksperchild=1) as pool:
+        return pool.apply(_measured, (function, args))

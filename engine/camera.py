@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["CAMERA_MODELS", "Camera"]
+__all__ = ["CAMERA_MODELS", "Camera", "look_at_point"]
 
 #: Supported COLMAP camera models and the names of their parameters, in COLMAP's order.
 CAMERA_MODELS = {
@@ -220,3 +220,30 @@ class Camera:
                 raise InputError(f"camera {name!r}: {key} must be an integer")
         return cls(name=name, width=data["width"], height=data["height"],
                    model=str(data["model"]), params=params, R=rotation, t=translation)
+
+
+def look_at_point(cameras):
+    """The point nearest (least squares) to all cameras' optical axes.
+
+    Parameters
+    ----------
+    cameras : sequence of Camera
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Where the cameras look; the centres' mean if the axes are (nearly) parallel.
+    """
+    centres = np.array([camera.center for camera in cameras], dtype=np.float64).reshape(-1, 3)
+    if len(centres) == 0:
+        raise ValueError("look_at_point needs at least one camera")
+    system, rhs = np.zeros((3, 3)), np.zeros(3)
+    for camera, centre in zip(cameras, centres):
+        axis = camera.R[2]
+        projector = np.eye(3) - np.outer(axis, axis)
+        system += projector
+        rhs += projector @ centre
+    eigenvalues = np.linalg.eigvalsh(system)
+    if eigenvalues[0] < 1e-6 * max(eigenvalues[-1], 1e-300):
+        return centres.mean(axis=0)
+    return np.linalg.solve(system, rhs)

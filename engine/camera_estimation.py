@@ -627,7 +627,7 @@ def compare_to_truth(estimate, true_cameras, centreline=None):
         between the true up direction, mapped into the estimate's frame, and +z) and
         ``focal_error_pct`` (mean focal length vs the true one).
     """
-    from .metrics import align_similarity
+    from .metrics import align_cameras
 
     truth = {camera.name: camera for camera in true_cameras}
     pairs = [(camera, truth[camera.name]) for camera in estimate.cameras if camera.name in truth]
@@ -635,16 +635,7 @@ def compare_to_truth(estimate, true_cameras, centreline=None):
     true_centres = np.array([camera.center for _, camera in pairs])
     size = float(np.mean(np.linalg.norm(true_centres - look_at_point(list(truth.values())),
                                         axis=1)))
-    # Align the cameras' centres and the points they look at (one scene distance along each
-    # optical axis): centres alone leave the alignment's rotation loose by about their own
-    # error over the orbit's size, which moves the whole scene by pixels in every view.
-    est_size = float(np.mean(np.linalg.norm(
-        est_centres - look_at_point([camera for camera, _ in pairs]), axis=1)))
-    similarity = align_similarity(
-        np.concatenate([est_centres, est_centres + est_size * np.array(
-            [camera.R[2] for camera, _ in pairs])]),
-        np.concatenate([true_centres, true_centres + size * np.array(
-            [camera.R[2] for _, camera in pairs])]))
+    similarity = align_cameras([camera for camera, _ in pairs], [true for _, true in pairs])
     centre_errors = np.linalg.norm(similarity.apply(est_centres) - true_centres, axis=1) / size
     rotation_errors = [_rotation_angle(true.R @ (camera.R @ similarity.R.T).T)
                        for camera, true in pairs]

@@ -210,7 +210,7 @@ class _View:
             return self._distance.astype(np.float32) / 8
         distance = cv2.distanceTransform((~mask).view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_5)
         if self.keep_distance:
-            self._distance = np.floor(np.minimum(distance * 8, 65535)).astype(np.uint16)
+            self._distance = np.floor(np.minimum(distance, 65535 / 8) * 8).astype(np.uint16)
         return distance
 
 

@@ -9,8 +9,6 @@ the crossings, segments 2N+1 for an open cable) and how far the segments' centre
 the true one, in radii. The last row carves 200 views of 3840x2880 for memory alone.
 """
 
-import multiprocessing
-import resource
 import tempfile
 import time
 from dataclasses import replace
@@ -20,6 +18,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .benchmarks import in_fresh_process
 from .camera import Camera
 from .carving import CarvingSettings, carve
 from .segment_graph import extract_segment_graph
@@ -86,28 +85,8 @@ def _reader(path, scale=1):
     return read
 
 
-def _reset_peak_memory():
-    """Forget the peak resident size so far (Linux); a spawned process starts from its parent's."""
-    try:
-        Path("/proc/self/clear_refs").write_text("5")
-    except OSError:
-        pass
-
-
-def _peak_memory_mb():
-    """Peak resident size since :func:`_reset_peak_memory`, in MB."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
 def _carve_row(cameras, paths, truth, settings, scale, cells):
     """Runs in a fresh process: carve from files, build the graph, score."""
-    _reset_peak_memory()
     if cells:
         # the issue's grid: ``cells`` voxels along the longest side of the cable's box
         side = float(np.ptp(truth.centreline, axis=0).max() + 2 * truth.radius)
@@ -126,14 +105,7 @@ def _carve_row(cameras, paths, truth, settings, scale, cells):
                                       voxel_size=grid.voxel_size, radius=grid.radius)
         row["graph_s"] = time.perf_counter() - carved
         row.update(graph_scores(graph, truth))
-    row["peak_mb"] = _peak_memory_mb()
     return row
-
-
-def _in_fresh_process(*args):
-    context = multiprocessing.get_context("spawn")
-    with context.Pool(1, maxtasksperchild=1) as pool:
-        return pool.apply(_carve_row, args)
 
 
 def _scene_rows(specs, settings, folder, cells):
@@ -147,7 +119,7 @@ def _scene_rows(specs, settings, folder, cells):
         paths = _write_masks(place, [s.mask for s in segmentations],
                              [s.junctions for s in segmentations])
         row = {"scene": label, "views": spec.views, "size": f"{spec.width}x{spec.height}"}
-        row.update(_in_fresh_process(scene.cameras, paths, scene.truth, settings, 1, cells))
+        row.update(in_fresh_process(_carve_row, scene.cameras, paths, scene.truth, settings, 1, cells))
         rows.append(row)
     return rows
 
@@ -169,7 +141,7 @@ def _memory_row(settings, folder, views=200):
     truth = truth.with_cameras(())
     row = {"scene": "memory: table 3", "views": len(big),
            "size": f"{960 * _MEMORY_SCALE}x{720 * _MEMORY_SCALE}"}
-    row.update(_in_fresh_process(big, paths * (views // len(cameras)), truth, settings,
+    row.update(in_fresh_process(_carve_row, big, paths * (views // len(cameras)), truth, settings,
                                  _MEMORY_SCALE, 0))
     return row
 

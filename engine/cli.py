@@ -62,6 +62,38 @@ def _run_cameras(args):
     log.info("%d cameras written to %s", len(estimate.cameras), args.output)
 
 
+def _run_reconstruct(args):
+    from pathlib import Path
+
+    from .carving import CarvingSettings
+    from .obj_export import write_obj
+    from .pipeline import PipelineSettings, reconstruct
+    from .result import write_result
+    from .segmentation import ColourRange, SegmentationSettings
+
+    output = Path(args.output or Path(args.images).resolve().name + ".cable.json")
+    for path in (output, Path(args.obj) if args.obj else None):
+        if path is not None and path.exists() and not args.overwrite:
+            raise InputError(f"{path} exists (use --overwrite to replace it)")
+        if path is not None and not path.resolve().parent.is_dir():
+            raise InputError(f"{path.parent} is not a folder")
+    settings = PipelineSettings(segmentation=settings_from_arguments(SegmentationSettings, args),
+                                carving=settings_from_arguments(CarvingSettings, args),
+                                reference_frame=args.reference_frame)
+    result = reconstruct(args.images, cameras=args.cameras, masks=args.masks,
+                         colour=ColourRange.parse(args.hsv) if args.hsv else None,
+                         diameter=args.diameter, length=args.length, settings=settings,
+                         progress=None if args.quiet else ProgressBar())
+    write_result(result, output, overwrite=args.overwrite)
+    if args.obj:
+        write_obj(result, args.obj, overwrite=args.overwrite)
+    for warning in result.warnings:
+        log.warning("warning: %s", warning)
+    points = sum(len(path.points) for path in result.paths)
+    log.info("%d path(s), %d points, %d crossing(s), radius %.4g %s -> %s", len(result.paths),
+             points, len(result.crossings), result.radius, result.units, output)
+
+
 def _run_bench(args):
     from .benchmarks import bench_segment, format_table
 
@@ -75,15 +107,21 @@ def _run_bench(args):
         from .carving_benchmark import bench_carve
 
         rows = bench_carve(views=args.views)
-    else:
+    elif args.stage == "rod":
         from .rod_benchmark import bench_rod
 
         rows = bench_rod()
+    else:
+        from .pipeline_benchmark import bench_pipeline
+
+        rows = bench_pipeline(views=args.views, sample=args.sample,
+                              progress=None if args.quiet else ProgressBar())
     print(format_table(rows))
 
 
 def build_parser():
     """The argument parser with every stage command."""
+    from .carving import CarvingSettings
     from .segmentation import SegmentationSettings
 
     parser = argparse.ArgumentParser(
@@ -124,10 +162,38 @@ def build_parser():
     cameras.add_argument("--overwrite", action="store_true", help="replace an existing model")
     cameras.set_defaults(run=_run_cameras)
 
+    rebuild = commands.add_parser(
+        "reconstruct", parents=[quiet], help="reconstruct the cable as one continuous centreline",
+        description="Reconstruct the cable(s) in the frames: a result JSON "
+                    "(cable_recon.result/1) with one path per cable, its crossings and cameras.")
+    rebuild.add_argument("images", help="folder of .jpg/.png frames, or a video")
+    rebuild.add_argument("--cameras", metavar="MODEL_DIR",
+                         help="COLMAP model (text or binary) of the frames, used as is "
+                              "(default: estimate the cameras)")
+    rebuild.add_argument("--masks", metavar="MASKS_DIR",
+                         help="masks written by 'segment' (possibly edited), used instead of "
+                              "segmenting")
+    scale = rebuild.add_mutually_exclusive_group()
+    scale.add_argument("--diameter", type=float, metavar="MM",
+                       help="the cable's measured diameter in mm: the result is in metres")
+    scale.add_argument("--length", type=float, metavar="M",
+                       help="the cable's length in metres: the result is in metres")
+    rebuild.add_argument("-o", "--output", metavar="RESULT_JSON",
+                         help="result file (default: <images folder name>.cable.json here)")
+    rebuild.add_argument("--obj", metavar="OBJ", help="also write the cable as an OBJ tube mesh")
+    rebuild.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    rebuild.add_argument("--hsv", metavar="H1,S1,V1,H2,S2,V2",
+                         help="cable colour range (default: found on the reference frame)")
+    rebuild.add_argument("--reference-frame", type=int, default=0,
+                         help="frame the automatic colour is taken from (default 0)")
+    add_settings_arguments(rebuild, SegmentationSettings)
+    add_settings_arguments(rebuild, CarvingSettings)
+    rebuild.set_defaults(run=_run_reconstruct)
+
     bench = commands.add_parser(
         "bench", parents=[quiet], help="measure a stage's accuracy and speed on ground-truth scenes",
         description="Print a table: one row per ground-truth scene.")
-    bench.add_argument("stage", choices=["segment", "cameras", "carve", "rod"])
+    bench.add_argument("stage", choices=["segment", "cameras", "carve", "rod", "pipeline"])
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")

@@ -28,13 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .camera import Camera
+from .camera import Camera, look_at_point
 from .ground_truth import GroundTruth
 from .result import CablePath, Crossing, Result
 from .validation import as_points
 
-__all__ = ["MetricSettings", "Similarity", "CrossingCheck", "Metrics", "align_similarity",
-           "align_result_to_truth", "evaluate"]
+__all__ = ["MetricSettings", "Similarity", "CrossingCheck", "Metrics", "align_cameras",
+           "align_similarity", "align_result_to_truth", "evaluate"]
 
 
 @dataclass(frozen=True)
@@ -205,11 +205,40 @@ def align_similarity(source_points, target_points):
     return Similarity(scale, rotation, translation)
 
 
+def align_cameras(source, target):
+    """The similarity that best maps cameras ``source`` onto ``target`` (matched by name).
+
+    It is fitted to the cameras' centres and to the points they look at (one scene distance
+    along each optical axis): centres alone leave the rotation loose by about their own error
+    over the rig's size, which moves the whole scene by pixels in every view.
+
+    Parameters
+    ----------
+    source, target : sequence of Camera
+        At least 3 names in common.
+
+    Returns
+    -------
+    Similarity
+    """
+    by_name = {camera.name: camera for camera in target}
+    pairs = [(camera, by_name[camera.name]) for camera in source if camera.name in by_name]
+    points = []
+    for side in (0, 1):
+        cameras = [pair[side] for pair in pairs]
+        if len(cameras) < 3:
+            raise ValueError("at least 3 cameras with the same names are needed")
+        centres = np.array([camera.center for camera in cameras])
+        distance = np.mean(np.linalg.norm(centres - look_at_point(cameras), axis=1))
+        axes = np.array([camera.R[2] for camera in cameras])
+        points.append(np.concatenate([centres, centres + distance * axes]))
+    return align_similarity(points[0], points[1])
+
+
 def align_result_to_truth(result, truth):
     """Bring a result into the truth's frame through the cameras both hold.
 
-    Cameras are matched by image name; the similarity is fitted from the result's camera centres
-    to the true ones.
+    Cameras are matched by image name; the similarity is fitted by :func:`align_cameras`.
 
     Parameters
     ----------
@@ -238,11 +267,10 @@ def align_result_to_truth(result, truth):
             f"aligning to the truth needs at least 3 cameras with the same image name in the "
             f"result ({len(result.cameras)} cameras) and the truth ({len(truth.cameras)} "
             f"cameras); {len(set(names))} in common")
-    result_centres = {camera.name: camera.center for camera in result.cameras}
-    names = sorted(set(names))
+    names = set(names)
     try:
-        similarity = align_similarity([result_centres[n] for n in names],
-                                      [true_centres[n] for n in names])
+        similarity = align_cameras([c for c in result.cameras if c.name in names],
+                                   [c for c in truth.cameras if c.name in names])
     except ValueError as error:
         raise ValueError(f"cannot align the result's cameras to the truth's: {error}") from None
     paths = tuple(CablePath(similarity.apply(path.points),
@@ -412,12 +440,15 @@ class CrossingCheck:
     listed : bool or None
         A crossing in ``result.crossings`` lies near and names the right strand as over (True)
         or the under strand (False); None when none lies near.
+    confidence : float or None
+        The confidence of the nearest listed crossing within reach (None when none lies near).
     """
 
     index: int
     right: bool
     height_difference: float
     listed: object
+    confidence: object = None
 
 
 @dataclass(frozen=True)
@@ -577,28 +608,31 @@ def _crossing_checks(truth, line, recon, positions, result, settings, r):
         difference = (means[0] - means[1]) / r
         right = bool(np.isfinite(difference) and difference >= settings.crossing_height)
         checks.append(CrossingCheck(k, right, float(difference),
-                                    _listed(truth, crossing, line, recon, positions, result,
-                                            settings, r)))
+                                    *_listed(truth, crossing, line, recon, positions, result,
+                                             settings, r)))
     return tuple(checks)
 
 
 def _listed(truth, crossing, line, recon, positions, result, settings, r):
+    """What the listed crossings say about ``crossing``, and the nearest one's confidence."""
     reach = settings.listed_reach * r
     place = truth.crossing_position(crossing)
     true_arc = truth.arc_length
     answer = None
-    for entry in result.crossings:
-        if np.linalg.norm(entry.position - place) > reach:
-            continue
+    near = [entry for entry in result.crossings
+            if np.linalg.norm(entry.position - place) <= reach]
+    confidence = (min(near, key=lambda e: np.linalg.norm(e.position - place)).confidence
+                  if near else None)
+    for entry in near:
         dense_index = recon.vertex_dense[entry.over.path][entry.over.index]
         point, arc = recon.dense[dense_index], positions[dense_index]
         to_over = line.arc_distance(arc, true_arc[crossing.over])
         to_under = line.arc_distance(arc, true_arc[crossing.under])
         if to_over <= to_under and np.linalg.norm(point - truth.centreline[crossing.over]) <= reach:
-            return True
+            return True, confidence
         if to_under < to_over and np.linalg.norm(point - truth.centreline[crossing.under]) <= reach:
             answer = False
-    return answer
+    return answer, confidence
 
 
 def evaluate(result, truth, *, align=False, settings=None):

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .camera import look_at_point
 from .metrics import Similarity
 
 __all__ = ["UprightSettings", "fit_plane", "look_at_point", "make_upright"]
@@ -135,33 +136,6 @@ def fit_plane(points, threshold, *, iterations=500, seed=0):
             break
         inliers = refined
     return normal, offset, inliers
-
-
-def look_at_point(cameras):
-    """The point nearest (least squares) to all cameras' optical axes.
-
-    Parameters
-    ----------
-    cameras : sequence of Camera
-
-    Returns
-    -------
-    ndarray, shape (3,)
-        Where the cameras look; the centres' mean if the axes are (nearly) parallel.
-    """
-    centres = np.array([camera.center for camera in cameras], dtype=np.float64).reshape(-1, 3)
-    if len(centres) == 0:
-        raise ValueError("look_at_point needs at least one camera")
-    system, rhs = np.zeros((3, 3)), np.zeros(3)
-    for camera, centre in zip(cameras, centres):
-        axis = camera.R[2]
-        projector = np.eye(3) - np.outer(axis, axis)
-        system += projector
-        rhs += projector @ centre
-    eigenvalues = np.linalg.eigvalsh(system)
-    if eigenvalues[0] < 1e-6 * max(eigenvalues[-1], 1e-300):
-        return centres.mean(axis=0)
-    return np.linalg.solve(system, rhs)
 
 
 def _heading(cameras, up):

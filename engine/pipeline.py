@@ -1,0 +1,407 @@
+"""The whole reconstruction: images to one continuous centreline per cable.
+
+Stages, each timed in the result (DESIGN.md's data flow)::
+
+    masks + junctions (§3.1)   segmented here, or read from a folder written by ``segment``
+    cameras (§3.2)             a COLMAP model given as is, or estimated with pycolmap (upright)
+    carving (§3.2)             occupancy and junction voxels
+    segment graph (§3.3)       junctions, ends and segments on the hull's core
+    topology (§3.5)            which branch continues which, over/under, one path per cable
+    rod fit (§3.4, §3.6)       each whole path as one elastic rod, pulled onto the cable's 2D
+                               centre in every view, with contact at its crossings
+    radius and scale           the radius from the cable's width in the images; ``diameter`` or
+                               ``length`` scales the world to metres
+"""
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .camera_estimation import CameraEstimationSettings, estimate_cameras
+from .carving import CarvingSettings, carve
+from .colmap_model import read_colmap_model
+from .errors import InputError, ReconstructionError
+from .image_sequence import open_image_sequence, read_image
+from .metrics import Similarity
+from .progress import StageProgress, check_cancel
+from .result import CablePath, Crossing, Result, StrandRef
+from .rod_fit import Contact, ImageEvidence, RodFitSettings, Voxels, fit_rod
+from .segment_graph import SegmentGraphSettings, extract_segment_graph
+from .segmentation import (ColourRange, SegmentationSettings, auto_colour, cable_width,
+                           junction_map, segment_frame)
+from .topology import TopologySettings, resolve_topology
+from .upright import UprightSettings, make_upright
+
+__all__ = ["PipelineSettings", "View", "reconstruct", "measure_radius", "read_masks"]
+
+log = logging.getLogger(__name__)
+
+#: Share of the progress bar per stage (cameras dominate when they are estimated).
+_STAGES = {"masks": 0.10, "cameras": 0.35, "carving": 0.15, "graph": 0.05, "topology": 0.15,
+           "fit": 0.20}
+
+
+@dataclass(frozen=True)
+class PipelineSettings:
+    """Every stage's settings, in one place.
+
+    Attributes
+    ----------
+    segmentation : SegmentationSettings
+    cameras : CameraEstimationSettings
+    carving : CarvingSettings
+    graph : SegmentGraphSettings
+    topology : TopologySettings
+    fit : RodFitSettings
+    upright : UprightSettings
+        How the world is put upright when the cameras come from a model (estimated cameras
+        are put upright by the estimation).
+    reference_frame : int
+        Frame the automatic cable colour is taken from.
+    """
+
+    segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
+    cameras: CameraEstimationSettings = field(default_factory=CameraEstimationSettings)
+    carving: CarvingSettings = field(default_factory=CarvingSettings)
+    graph: SegmentGraphSettings = field(default_factory=SegmentGraphSettings)
+    topology: TopologySettings = field(default_factory=TopologySettings)
+    fit: RodFitSettings = field(default_factory=RodFitSettings)
+    upright: UprightSettings = field(default_factory=UprightSettings)
+    reference_frame: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class View:
+    """One registered frame: its camera, a loader of its image, its masks."""
+
+    camera: object
+    path: Path
+    mask: np.ndarray
+    junctions: np.ndarray
+
+    def image(self):
+        """The frame, RGB."""
+        return read_image(self.path)
+
+
+def read_masks(folder, names, width, height):
+    """Masks written by ``segment`` (possibly corrected by hand), one per frame.
+
+    ``folder`` is the ``segment`` output folder (with ``masks/`` and ``junctions/``) or its
+    ``masks/`` folder; a frame's mask is ``<stem>.png`` (cable > 127). Junction maps are read
+    from the sibling ``junctions/`` folder when every frame has one, else made from the masks.
+
+    Returns
+    -------
+    masks, junctions : list of ndarray of bool
+        ``junctions`` is None when they must be made from the masks.
+
+    Raises
+    ------
+    InputError
+        A frame has no mask, or a mask is unreadable or the wrong size.
+    """
+    folder = Path(folder)
+    if (folder / "masks").is_dir():
+        folder = folder / "masks"
+    if not folder.is_dir():
+        raise InputError(f"--masks {folder}: not a folder")
+    junction_folder = folder.parent / "junctions"
+
+    def load(path, what):
+        mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if mask is None:
+            raise InputError(f"{what} {path} is missing or not an image")
+        if mask.shape != (height, width):
+            raise InputError(f"{what} {path} is {mask.shape[1]}x{mask.shape[0]}, the frames "
+                             f"are {width}x{height}")
+        return mask > 127
+
+    masks = [load(folder / (Path(name).stem + ".png"), "mask") for name in names]
+    junction_paths = [junction_folder / (Path(name).stem + ".png") for name in names]
+    if all(path.is_file() for path in junction_paths):
+        return masks, [load(path, "junction map") for path in junction_paths]
+    return masks, None
+
+
+def measure_radius(points, views, *, junction_margin=1.0):
+    """The cable's radius from its width in the images, along a fitted centreline.
+
+    In every view, each centreline point that projects inside the frame, on the cable and away
+    from junctions gives half the local width (the mask's distance transform at the point,
+    less a quarter pixel for pixel centres) times depth over focal length.
+
+    Parameters
+    ----------
+    points : sequence of ndarray, shape (N, 3)
+        The fitted centreline(s).
+    views : sequence of View
+    junction_margin : float, optional
+        Points within this many cable widths of a junction pixel are left out.
+
+    Returns
+    -------
+    float or None
+        The median over every sample; None if there is none.
+    """
+    points = np.concatenate([np.asarray(p, dtype=float) for p in points])
+    samples = []
+    for view in views:
+        camera = view.camera
+        if not view.mask.any():
+            continue
+        distance = cv2.distanceTransform(view.mask.view(np.uint8), cv2.DIST_L2,
+                                         cv2.DIST_MASK_PRECISE)
+        width = cable_width(view.mask)
+        grow = max(int(round(junction_margin * width)), 1)
+        near_junction = cv2.dilate(view.junctions.view(np.uint8),
+                                   np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)) > 0
+        pixels, depth = camera.project(points)
+        with np.errstate(invalid="ignore"):
+            col, row = np.floor(pixels[:, 0]), np.floor(pixels[:, 1])
+            inside = ((depth > 0) & (col >= 0) & (row >= 0) & (col < camera.width)
+                      & (row < camera.height))
+        rows, cols = row[inside].astype(int), col[inside].astype(int)
+        usable = view.mask[rows, cols] & ~near_junction[rows, cols]
+        half = distance[rows, cols][usable] - 0.25
+        samples.append(half * depth[inside][usable] / np.mean(camera.focal))
+    samples = np.concatenate(samples) if samples else np.zeros(0)
+    return float(np.median(samples)) if len(samples) else None
+
+
+class _Clock:
+    """Times the stages and moves the progress bar through their shares."""
+
+    def __init__(self, progress, cancel, stages):
+        self.progress, self.cancel = StageProgress(progress), cancel
+        total = sum(_STAGES[name] for name in stages)
+        self.slices, start = {}, 0.0
+        for name in stages:
+            self.slices[name] = (start / total, (start + _STAGES[name]) / total)
+            start += _STAGES[name]
+        self.timings = {}
+
+    def stage(self, name):
+        check_cancel(self.cancel, "the reconstruction")
+        self.current, self.started = name, time.perf_counter()
+        return self.progress.part(*self.slices[name])
+
+    def done(self):
+        self.timings[self.current] = round(time.perf_counter() - self.started, 3)
+
+
+def _segment(sequence, colour, settings, stage, cancel):
+    if colour is None:
+        colour = auto_colour(sequence.read(min(settings.reference_frame, len(sequence) - 1)))
+    masks, junctions = [], []
+    for number in range(len(sequence)):
+        check_cancel(cancel, "the reconstruction")
+        segmentation = segment_frame(sequence.read(number), colour, settings.segmentation)
+        masks.append(segmentation.mask)
+        junctions.append(segmentation.junctions)
+        stage((number + 1) / len(sequence), "masks")
+    return colour, masks, junctions
+
+
+def _cameras(sequence, cameras, settings, stage, cancel):
+    """Cameras of the frames, the world's up direction and the warnings."""
+    warnings = []
+    if cameras is None:
+        estimate = estimate_cameras(sequence.paths, settings=settings.cameras,
+                                    focal_length_px=sequence.focal_length_px,
+                                    progress=stage, cancel=cancel)
+        if estimate.unregistered:
+            warnings.append(f"{len(estimate.unregistered)} frame(s) did not register and were "
+                            f"left out: {', '.join(estimate.unregistered)}")
+        return list(estimate.cameras), np.array([0.0, 0.0, 1.0]), warnings
+    if isinstance(cameras, (str, Path)):
+        model = read_colmap_model(cameras)
+        cameras, points = list(model.cameras), model.points
+    else:
+        cameras, points = list(cameras), np.zeros((0, 3))
+    names = set(sequence.names)
+    known = [camera for camera in cameras if camera.name in names]
+    if not known:
+        raise InputError("no camera of the model is named after a frame "
+                         f"(frames: {', '.join(sorted(names)[:3])}, ...)")
+    missing = sorted(names - {camera.name for camera in known})
+    if missing:
+        warnings.append(f"{len(missing)} frame(s) have no camera and were left out: "
+                        f"{', '.join(missing)}")
+    # the model's frame is kept; "up" (for over and under) is its table normal or cameras' up
+    _, _, transform, _ = make_upright(known, points, settings=settings.upright)
+    stage(1.0, "cameras")
+    return known, transform.R[2], warnings
+
+
+def _fit_paths(topology, grid, views, radius, up, settings, stage, cancel):
+    """One rod per path with contact at its crossings; crossings re-indexed into the fits."""
+    evidence = [ImageEvidence.from_mask(view.camera, view.mask, view.junctions,
+                                        settings=settings.fit) for view in views]
+    voxels = Voxels.from_grid(grid, agreement=settings.carving.core_agreement)
+    fits = []
+    for number, path in enumerate(topology.paths):
+        contacts = [Contact(over=c.over[1], under=c.under[1]) for c in topology.crossings
+                    if c.over[0] == number and c.under[0] == number]
+        part = stage.part(number / len(topology.paths), (number + 1) / len(topology.paths))
+        nearby = voxels.near(path.points, 4.0 * radius)
+        fits.append(fit_rod(path.points, radius, voxels=nearby, views=evidence,
+                            contacts=contacts, closed=path.closed, up=up,
+                            settings=settings.fit, progress=part, cancel=cancel))
+    crossings = []
+    for crossing in topology.crossings:
+        (over_path, over_index), (under_path, under_index) = crossing.over, crossing.under
+        over = StrandRef(over_path, fits[over_path].vertex_of(over_index))
+        under = StrandRef(under_path, fits[under_path].vertex_of(under_index))
+        position = 0.5 * (fits[over.path].points[over.index] + fits[under.path].points[under.index])
+        crossings.append(Crossing(position, over, under,
+                                  min(max(float(crossing.confidence), 0.0), 1.0)))
+    return fits, crossings
+
+
+def _scale_factor(fits, radius, diameter, length):
+    """The factor to metres asked for (``diameter`` in mm or ``length`` in m), or None."""
+    if diameter is not None:
+        return 0.5 * diameter / 1000.0 / radius
+    if length is not None:
+        return length / sum(_polyline_length(fit.points, fit.closed) for fit in fits)
+    return None
+
+
+def _polyline_length(points, closed):
+    points = np.vstack([points, points[:1]]) if closed else np.asarray(points)
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+
+
+def reconstruct(images, *, cameras=None, masks=None, colour=None, diameter=None, length=None,
+                settings=PipelineSettings(), progress=None, cancel=None):
+    """Reconstruct the cable(s) seen in a sequence of frames.
+
+    Parameters
+    ----------
+    images : str or os.PathLike
+        A folder of .jpg/.png frames (natural order) or a video.
+    cameras : str, os.PathLike or sequence of Camera, optional
+        A COLMAP model folder (or cameras) whose image names are the frames' file names, used
+        as is (its world frame and units kept); estimated with pycolmap if None (upright, the
+        table at z = 0, arbitrary scale).
+    masks : str or os.PathLike, optional
+        Masks written by ``segment`` (possibly corrected by hand), used instead of segmenting.
+    colour : ColourRange, optional
+        The cable colour; found automatically on ``settings.reference_frame`` if None.
+    diameter : float, optional
+        The cable's measured diameter in millimetres: the result is scaled to metres.
+    length : float, optional
+        The cable's length in metres: the result is scaled to metres.
+    settings : PipelineSettings, optional
+    progress : callable, optional
+        ``progress(fraction, message)``.
+    cancel : threading.Event, optional
+
+    Returns
+    -------
+    Result
+
+    Raises
+    ------
+    InputError
+        Unusable input (empty folder, unreadable or mixed-size frames, masks that do not
+        match, a model with no camera named after a frame, both ``diameter`` and ``length``).
+    ReconstructionError
+        Too few frames registered, no cable in the frames, or no path could be formed.
+    Cancelled
+    """
+    if diameter is not None and length is not None:
+        raise InputError("give the cable's diameter or its length, not both")
+    for name, value in (("diameter", diameter), ("length", length)):
+        if value is not None and not value > 0:
+            raise InputError(f"the {name} must be a positive number")
+    if colour is not None and not isinstance(colour, ColourRange):
+        colour = ColourRange.parse(str(colour))
+    stages = ["masks", "cameras", "carving", "graph", "topology", "fit"]
+    clock = _Clock(progress, cancel, stages)
+    with open_image_sequence(images) as sequence:
+        stage = clock.stage("masks")
+        if masks is not None:
+            frame_masks, frame_junctions = read_masks(masks, sequence.names, sequence.width,
+                                                      sequence.height)
+            if frame_junctions is None:
+                frame_junctions = [junction_map(m, cable_width(m), settings.segmentation)
+                                   for m in frame_masks]
+            stage(1.0, "masks")
+        else:
+            colour, frame_masks, frame_junctions = _segment(sequence, colour, settings, stage,
+                                                            cancel)
+        clock.done()
+        if not any(mask.any() for mask in frame_masks):
+            raise ReconstructionError("no cable pixels in any frame: check the cable colour "
+                                      "(python -m engine segment shows the masks)")
+        empty = [name for name, mask in zip(sequence.names, frame_masks) if not mask.any()]
+        stage = clock.stage("cameras")
+        frame_cameras, up, warnings = _cameras(sequence, cameras, settings, stage, cancel)
+        clock.done()
+        if empty:
+            warnings.append(f"no cable pixels in {len(empty)} frame(s): {', '.join(empty)}")
+        by_name = dict(zip(sequence.names, zip(sequence.paths, frame_masks, frame_junctions)))
+        views = [View(camera, *by_name[camera.name]) for camera in frame_cameras]
+        result = _reconstruct_views(views, up, clock, settings, cancel, warnings)
+    return _finish(result, views, diameter, length, cameras is None, clock)
+
+
+def _reconstruct_views(views, up, clock, settings, cancel, warnings):
+    stage = clock.stage("carving")
+    try:
+        grid = carve([v.camera for v in views], [v.mask for v in views],
+                     [v.junctions for v in views], settings=settings.carving, progress=stage,
+                     cancel=cancel)
+    except ValueError as error:
+        raise ReconstructionError(f"carving failed: {error}") from None
+    clock.done()
+    if not grid.occupied.any():
+        raise ReconstructionError("the frames do not agree on any cable voxel: the cameras or "
+                                  "the masks are wrong")
+    stage = clock.stage("graph")
+    core = grid.core(settings.carving.core_agreement)
+    graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,
+                                  voxel_size=grid.voxel_size, radius=grid.radius,
+                                  settings=settings.graph, progress=stage, cancel=cancel)
+    clock.done()
+    if graph.n_segments == 0:
+        raise ReconstructionError("no cable segment could be found in the carved volume")
+    stage = clock.stage("topology")
+    topology = resolve_topology(graph, views, radius=grid.radius, up=up,
+                                settings=settings.topology, progress=stage, cancel=cancel)
+    clock.done()
+    stage = clock.stage("fit")
+    fits, crossings = _fit_paths(topology, grid, views, grid.radius, up, settings, stage, cancel)
+    clock.done()
+    warnings = list(warnings) + list(topology.warnings)
+    return fits, crossings, grid.radius, warnings
+
+
+def _finish(parts, views, diameter, length, estimated, clock):
+    fits, crossings, carved_radius, warnings = parts
+    radius = measure_radius([fit.points for fit in fits], views) or carved_radius
+    scale = _scale_factor(fits, radius, diameter, length)
+    cameras = [view.camera for view in views]
+    units = "model"
+    if scale is not None:
+        similarity = Similarity(scale=scale, R=np.eye(3), t=np.zeros(3))
+        fits_points = [similarity.apply(fit.points) for fit in fits]
+        cameras = [similarity.apply_camera(camera) for camera in cameras]
+        crossings = [Crossing(similarity.apply(c.position[None])[0], c.over, c.under,
+                              c.confidence) for c in crossings]
+        radius, units = radius * scale, "m"
+    else:
+        fits_points = [fit.points for fit in fits]
+        if estimated:
+            warnings.append("the cameras were estimated, so the scale is arbitrary: give "
+                            "--diameter or --length for metres")
+    paths = [CablePath(points, closed=fit.closed) for points, fit in zip(fits_points, fits)]
+    clock.progress(1.0, "done")
+    return Result(radius=radius, paths=paths, crossings=crossings, cameras=cameras, units=units,
+                  warnings=warnings, timings=dict(clock.timings))

@@ -1,0 +1,167 @@
+"""The whole reconstruction: `reconstruct` and `python -m engine reconstruct` on captures."""
+
+import shutil
+import subprocess
+import sys
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from engine import Cancelled, InputError, read_result
+from engine.metrics import evaluate
+from engine.obj_export import tube_mesh, write_obj
+from engine.overlay import draw_overlay
+from engine.pipeline import reconstruct
+from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+
+
+@pytest.fixture(scope="module")
+def capture(tmp_path_factory):
+    """A 2-crossing table scene, 24 views at 800x600, written as a user's capture."""
+    scene = make_scene(SceneSpec(crossings=2, seed=3, views=24, width=800, height=600,
+                                 image_format="jpg"))
+    return write_scene(scene, tmp_path_factory.mktemp("capture") / "c"), scene
+
+
+@pytest.fixture(scope="module")
+def result(capture):
+    folder, _ = capture
+    calls = []
+    result = reconstruct(folder / "images", cameras=folder / "sparse",
+                         progress=lambda fraction, message: calls.append(fraction))
+    return result, calls
+
+
+def run_engine(*args):
+    return subprocess.run([sys.executable, "-m", "engine", *map(str, args)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_one_path_through_every_crossing_with_true_cameras(capture, result):
+    _, scene = capture
+    result, calls = result
+    metrics = evaluate(result, scene.truth)
+    assert len(result.paths) == 1 and metrics.one_path
+    assert metrics.crossings_right == metrics.crossings_total == 2
+    assert all(c.confidence > 0.5 for c in result.crossings)
+    assert metrics.completeness > 0.95
+    assert metrics.accuracy_mean < 0.3 and metrics.accuracy_p95 < 0.8
+    assert abs(result.radius / scene.truth.radius - 1) < 0.1
+    assert result.units == "model" and len(result.cameras) == 24
+    assert set(result.timings) == {"masks", "cameras", "carving", "graph", "topology", "fit"}
+    assert calls[-1] == pytest.approx(1.0) and all(a <= b + 1e-9 for a, b in zip(calls, calls[1:]))
+
+
+def test_same_input_same_curve(capture, result):
+    folder, _ = capture
+    again = reconstruct(folder / "images", cameras=folder / "sparse")
+    np.testing.assert_array_equal(again.paths[0].points, result[0].paths[0].points)
+
+
+def test_command_line_writes_result_and_obj_and_never_overwrites(capture, tmp_path):
+    folder, _ = capture
+    output, obj = tmp_path / "cable.json", tmp_path / "cable.obj"
+    run = run_engine("reconstruct", folder / "images", "--cameras", folder / "sparse",
+                     "--diameter", 8, "-o", output, "--obj", obj)
+    assert run.returncode == 0, run.stderr
+    assert "100%" in run.stderr
+    written = read_result(output)
+    assert written.units == "m" and written.radius == pytest.approx(0.004)
+    assert obj.read_text().startswith("# cable_recon result")
+    before = output.read_bytes()
+    again = run_engine("reconstruct", folder / "images", "--cameras", folder / "sparse",
+                       "-o", output)
+    assert again.returncode == 2 and "--overwrite" in again.stderr
+    assert output.read_bytes() == before
+
+
+def test_given_masks_are_used_and_a_missing_one_is_named(capture, tmp_path):
+    folder, _ = capture
+    masks = tmp_path / "masks"
+    shutil.copytree(folder / "masks", masks)
+    result = reconstruct(folder / "images", cameras=folder / "sparse", masks=masks)
+    assert len(result.paths) == 1
+    (masks / "005.png").unlink()
+    with pytest.raises(InputError, match="005.png"):
+        reconstruct(folder / "images", cameras=folder / "sparse", masks=masks)
+
+
+def test_no_cable_anywhere_fails_with_a_reason(capture, tmp_path):
+    folder, _ = capture
+    images = tmp_path / "images"
+    images.mkdir()
+    for path in sorted((folder / "images").iterdir()):
+        cv2.imwrite(str(images / path.name), np.full((600, 800, 3), 128, np.uint8))
+    run = run_engine("reconstruct", images, "--cameras", folder / "sparse", "-o",
+                     tmp_path / "r.json")
+    assert run.returncode == 3
+    assert "no cable pixels" in run.stderr
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_a_frame_without_cable_is_a_warning(capture, tmp_path):
+    folder, scene = capture
+    images = tmp_path / "images"
+    shutil.copytree(folder / "images", images)
+    cv2.imwrite(str(images / "007.jpg"), np.full((600, 800, 3), 128, np.uint8))
+    result = reconstruct(images, cameras=folder / "sparse")
+    assert any("007.jpg" in warning for warning in result.warnings)
+    assert evaluate(result, scene.truth).one_path
+
+
+def test_cameras_that_cannot_be_estimated_fail_with_a_reason(tmp_path):
+    images = tmp_path / "images"
+    images.mkdir()
+    for k in range(6):
+        image = np.full((300, 400, 3), 128, np.uint8)
+        cv2.line(image, (20, 150), (380, 150 + 10 * k), (30, 30, 210), 9)
+        cv2.imwrite(str(images / f"{k:03d}.png"), image)
+    run = run_engine("reconstruct", images, "-o", tmp_path / "r.json")
+    assert run.returncode == 3, run.stderr
+    assert "register" in run.stderr
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_bad_options_and_cancel(capture, tmp_path):
+    folder, _ = capture
+    with pytest.raises(InputError, match="not both"):
+        reconstruct(folder / "images", diameter=8, length=1.0)
+    with pytest.raises(InputError):
+        reconstruct(tmp_path)  # an empty folder
+    run = run_engine("reconstruct", tmp_path / "missing", "-o", tmp_path / "r.json")
+    assert run.returncode == 2 and run.stderr.count("\n") <= 2
+    cancel = threading.Event()
+
+    def progress(fraction, message):
+        if fraction > 0.2:
+            cancel.set()
+
+    with pytest.raises(Cancelled):
+        reconstruct(folder / "images", cameras=folder / "sparse", progress=progress,
+                    cancel=cancel)
+
+
+def test_obj_tube_and_overlay(capture, result, tmp_path):
+    folder, _ = capture
+    result, _ = result
+    vertices, faces = tube_mesh(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), 0.1, sides=8)
+    assert vertices.shape == (24, 3) and len(faces) == 2 * 8 + 2
+    np.testing.assert_allclose(np.hypot(vertices[:, 1], vertices[:, 2]), 0.1)
+    path = write_obj(result, tmp_path / "c.obj")
+    text = path.read_text()
+    assert text.count("\nv ") == len(result.paths[0].points) * 12
+    with pytest.raises(FileExistsError):
+        write_obj(result, path)
+    camera = result.cameras[0]
+    image = cv2.cvtColor(cv2.imread(str(folder / "images" / camera.name)), cv2.COLOR_BGR2RGB)
+    drawn = draw_overlay(image, result, camera)
+    changed = np.any(drawn != image, axis=2)
+    pixels, _ = camera.project(result.paths[0].points)
+    inside = ((pixels[:, 0] >= 1) & (pixels[:, 0] < camera.width - 1) & (pixels[:, 1] >= 1)
+              & (pixels[:, 1] < camera.height - 1))
+    cols, rows = pixels[inside, 0].astype(int), pixels[inside, 1].astype(int)
+    assert changed[rows, cols].mean() > 0.95  # the curve is drawn where it projects
+    assert changed.mean() < 0.2
