@@ -7,6 +7,7 @@ inside a test.
 import multiprocessing
 import resource
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -148,6 +149,7 @@ def _measured(function, args):
 def in_fresh_process(function, *args):
     """``function(*args)`` (a dict) run in a new process, with ``peak_mb`` (its peak resident
     memory, interpreter and libraries included) added."""
-    context = multiprocessing.get_context("spawn")
-    with context.Pool(1, maxtasksperchild=1) as pool:
-        return pool.apply(_measured, (function, args))
+    # a pool's exit terminates its worker (which pycolmap's signal handler reports noisily):
+    # an executor lets it finish
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as executor:
+        return executor.submit(_measured, function, args).result()

@@ -122,7 +122,9 @@ def test_flipping_a_crossing_swaps_over_under_and_the_heights():
     flipped = topology.flipped(0)
     before, after = topology.crossings[0], flipped.crossings[0]
     assert after.over == before.under and after.under == before.over
-    assert after.confidence == before.confidence
+    assert after.confidence == pytest.approx(before.cues["pairing_probability"]
+                                             - before.confidence)
+    assert after.confidence < 0.01 < 0.99 < before.confidence
     assert after.cues["height"] == -before.cues["height"]
     gap_before = (topology.paths[before.over[0]].points[before.over[1]]
                   - topology.paths[before.under[0]].points[before.under[1]]) @ UP
@@ -133,6 +135,8 @@ def test_flipping_a_crossing_swaps_over_under_and_the_heights():
     twice = flipped.flipped(0)
     for a, b in zip(twice.paths, topology.paths):
         np.testing.assert_allclose(a.points, b.points, atol=1e-12)
+    assert twice.crossings[0].confidence == pytest.approx(before.confidence)
+    assert twice.crossings[0].over == before.over
     assert isinstance(flipped, Topology)
 
 
