@@ -242,6 +242,18 @@ def _ridge(mask, half_width):
     corners of a cable's end or bumps of the outline) are dropped: their distance to the
     background is well below the largest one nearby.
     """
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    if not len(rows):
+        return np.zeros((0, 2)), np.zeros((0, 2))
+    # the mask's box with a margin: nothing outside it is near the ridge
+    margin = int(math.ceil(1.5 * half_width)) + 4
+    top, left = max(rows[0] - margin, 0), max(cols[0] - margin, 0)
+    box = mask[top:rows[-1] + margin + 1, left:cols[-1] + margin + 1]
+    points, normals = _ridge_in_box(box, half_width)
+    return points + (left, top), normals
+
+
+def _ridge_in_box(mask, half_width):
     distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     size = 2 * int(math.ceil(1.5 * half_width)) + 1
     nearby = cv2.dilate(distance, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size)))
@@ -358,13 +370,19 @@ def _near_ridge(points, shape, reach):
     if not len(points):
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     seeds = np.ones(shape, dtype=np.uint8)
-    seeds[np.clip(points[:, 1].astype(int), 0, shape[0] - 1),
-          np.clip(points[:, 0].astype(int), 0, shape[1] - 1)] = 0
-    near = cv2.distanceTransform(seeds, cv2.DIST_L2, cv2.DIST_MASK_5) <= reach + 1.0
-    pixels = np.flatnonzero(near)
-    rows, cols = np.divmod(pixels, shape[1])
-    _, nearest = cKDTree(points).query(np.column_stack([cols + 0.5, rows + 0.5]))
-    return pixels, nearest.astype(np.int64)
+    seed_rows = np.clip(points[:, 1].astype(int), 0, shape[0] - 1)
+    seed_cols = np.clip(points[:, 0].astype(int), 0, shape[1] - 1)
+    seeds[seed_rows, seed_cols] = 0
+    # each pixel's nearest seed pixel comes with the distance transform (labels number the
+    # seed pixels in raster order); the seed's ridge point is that pixel's nearest point
+    distance, labels = cv2.distanceTransformWithLabels(seeds, cv2.DIST_L2, cv2.DIST_MASK_5,
+                                                       labelType=cv2.DIST_LABEL_PIXEL)
+    pixels = np.flatnonzero(distance.ravel() <= reach + 1.0)
+    point_at = np.full(shape[0] * shape[1], -1, dtype=np.int64)
+    point_at[seed_rows * shape[1] + seed_cols] = np.arange(len(points))
+    seed_pixels = np.flatnonzero(seeds.ravel() == 0)
+    nearest = point_at[seed_pixels[labels.ravel()[pixels] - 1]]
+    return pixels, nearest
 
 
 @dataclass(frozen=True)
