@@ -26,6 +26,9 @@ _LAZY = {
     "RodSettings": "rod", "Rod": "rod", "solve_rod": "rod",
     "RodFitSettings": "rod_fit", "RodFit": "rod_fit", "fit_rod": "rod_fit",
     "ImageEvidence": "rod_fit", "Contact": "rod_fit", "Voxels": "rod_fit",
+    "TopologySettings": "topology", "resolve_topology": "topology",
+    "PipelineSettings": "pipeline", "Reconstruction": "pipeline", "reconstruct": "pipeline",
+    "run_reconstruction": "pipeline",
 }
 
 __all__ = [

@@ -15,7 +15,7 @@ Stages, each timed in the result (DESIGN.md's data flow)::
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -36,7 +36,8 @@ from .segmentation import (ColourRange, SegmentationSettings, auto_colour, cable
 from .topology import TopologySettings, resolve_topology
 from .upright import UprightSettings, make_upright
 
-__all__ = ["PipelineSettings", "View", "reconstruct", "measure_radius", "read_masks"]
+__all__ = ["PipelineSettings", "View", "Reconstruction", "reconstruct", "run_reconstruction",
+           "measure_radius", "read_masks", "cable_colour"]
 
 log = logging.getLogger(__name__)
 
@@ -238,11 +239,8 @@ def _cameras(sequence, cameras, settings, stage, cancel):
     return known, transform.R[2], warnings
 
 
-def _fit_paths(topology, grid, views, radius, up, settings, stage, cancel):
+def _fit_paths(topology, evidence, voxels, radius, up, settings, stage, cancel):
     """One rod per path with contact at its crossings; crossings re-indexed into the fits."""
-    evidence = [ImageEvidence.from_mask(view.camera, view.mask, view.junctions,
-                                        settings=settings.fit) for view in views]
-    voxels = Voxels.from_grid(grid, agreement=settings.carving.core_agreement)
     fits = []
     for number, path in enumerate(topology.paths):
         contacts = [Contact(over=c.over[1], under=c.under[1]) for c in topology.crossings
@@ -263,6 +261,14 @@ def _fit_paths(topology, grid, views, radius, up, settings, stage, cancel):
     return fits, crossings
 
 
+def cable_colour(image, mask):
+    """The cable's colour: the median of its pixels in one frame (sRGB, 0 to 1), or None."""
+    pixels = np.asarray(image)[np.asarray(mask, dtype=bool)]
+    if not len(pixels):
+        return None
+    return tuple(float(c) / 255.0 for c in np.median(pixels[:, :3], axis=0))
+
+
 def _scale_factor(fits, radius, diameter, length):
     """The factor to metres asked for (``diameter`` in mm or ``length`` in m), or None."""
     if diameter is not None:
@@ -280,6 +286,98 @@ def _polyline_length(points, closed):
 def reconstruct(images, *, cameras=None, masks=None, colour=None, diameter=None, length=None,
                 settings=PipelineSettings(), progress=None, cancel=None):
     """Reconstruct the cable(s) seen in a sequence of frames.
+
+    The parameters, errors and stages are :func:`run_reconstruction`'s.
+
+    Returns
+    -------
+    Result
+    """
+    return run_reconstruction(images, cameras=cameras, masks=masks, colour=colour,
+                              diameter=diameter, length=length, settings=settings,
+                              progress=progress, cancel=cancel).result
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """A finished reconstruction and what its final rod fit needs (§3.6).
+
+    Keeping it lets a user flip a crossing that came out wrong and re-run only the final fit,
+    a second or two, instead of the whole pipeline.
+
+    Attributes
+    ----------
+    result : Result
+        What :func:`reconstruct` returns.
+    views : tuple of View
+    topology : Topology
+        The paths and crossings the fit started from (crossings in the result's order).
+    evidence : tuple of ImageEvidence
+    voxels : Voxels
+    carved_radius : float
+        The radius the grid was carved with (world units before scaling).
+    up : ndarray, shape (3,)
+    settings : PipelineSettings
+    warnings : tuple of str
+        Warnings of the stages before the fit.
+    diameter, length : float or None
+        The scale asked for.
+    estimated : bool
+        The cameras were estimated (so the scale is arbitrary unless asked for).
+    colour : tuple of float or None
+        The cable's colour (sRGB, 0 to 1).
+    """
+
+    result: Result
+    views: tuple
+    topology: object
+    evidence: tuple
+    voxels: object
+    carved_radius: float
+    up: np.ndarray
+    settings: PipelineSettings
+    warnings: tuple
+    diameter: float = None
+    length: float = None
+    estimated: bool = False
+    colour: tuple = None
+
+    def flip(self, index, *, progress=None, cancel=None):
+        """The same reconstruction with crossing ``index`` flipped and the final fit re-run.
+
+        Parameters
+        ----------
+        index : int
+            Index into ``result.crossings`` (the same as ``topology.crossings``).
+        progress : callable, optional
+        cancel : threading.Event, optional
+
+        Returns
+        -------
+        Reconstruction
+            Its ``result.timings`` hold the re-fit's time only (``"fit"``).
+        """
+        if not 0 <= index < len(self.topology.crossings):
+            raise IndexError(f"there is no crossing {index} "
+                             f"({len(self.topology.crossings)} crossing(s))")
+        state = replace(self, topology=self.topology.flipped(index), result=None)
+        clock = _Clock(progress, cancel, ["fit"])
+        return state._fitted(clock, clock.stage("fit"), cancel)
+
+    def _fitted(self, clock, stage, cancel):
+        fits, crossings = _fit_paths(self.topology, self.evidence, self.voxels,
+                                     self.carved_radius, self.up, self.settings, stage, cancel)
+        clock.done()
+        result = _finish(fits, crossings, self, clock)
+        return replace(self, result=result)
+
+
+def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diameter=None,
+                       length=None, settings=PipelineSettings(), progress=None, cancel=None):
+    """Reconstruct the cable(s) seen in a sequence of frames, keeping what a re-fit needs.
+
+    :func:`reconstruct` is this function's ``.result``; the :class:`Reconstruction` it returns
+    can also flip a crossing and re-run only the final rod fit.
 
     Parameters
     ----------
@@ -304,7 +402,7 @@ def reconstruct(images, *, cameras=None, masks=None, colour=None, diameter=None,
 
     Returns
     -------
-    Result
+    Reconstruction
 
     Raises
     ------
@@ -348,11 +446,25 @@ def reconstruct(images, *, cameras=None, masks=None, colour=None, diameter=None,
             warnings.append(f"no cable pixels in {len(empty)} frame(s): {', '.join(empty)}")
         by_name = dict(zip(sequence.names, zip(sequence.paths, frame_masks, frame_junctions)))
         views = [View(camera, *by_name[camera.name]) for camera in frame_cameras]
-        result = _reconstruct_views(views, up, clock, settings, cancel, warnings)
-    return _finish(result, views, diameter, length, cameras is None, clock)
+        grid, topology, warnings = _carve_and_resolve(views, up, clock, settings, cancel,
+                                                      warnings)
+        reference = min(settings.reference_frame, len(sequence) - 1)
+        order = [reference] + [k for k in range(len(sequence)) if k != reference]
+        number = next((k for k in order if frame_masks[k].any()), reference)
+        colour_seen = cable_colour(sequence.read(number), frame_masks[number])
+    stage = clock.stage("fit")
+    evidence = [ImageEvidence.from_mask(view.camera, view.mask, view.junctions,
+                                        settings=settings.fit) for view in views]
+    voxels = Voxels.from_grid(grid, agreement=settings.carving.core_agreement)
+    state = Reconstruction(
+        result=None, views=tuple(views), topology=topology, evidence=tuple(evidence),
+        voxels=voxels, carved_radius=grid.radius, up=up, settings=settings,
+        warnings=tuple(warnings), diameter=diameter, length=length,
+        estimated=cameras is None, colour=colour_seen)
+    return state._fitted(clock, stage, cancel)
 
 
-def _reconstruct_views(views, up, clock, settings, cancel, warnings):
+def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
     stage = clock.stage("carving")
     try:
         grid = carve([v.camera for v in views], [v.mask for v in views],
@@ -376,18 +488,14 @@ def _reconstruct_views(views, up, clock, settings, cancel, warnings):
     topology = resolve_topology(graph, views, radius=grid.radius, up=up,
                                 settings=settings.topology, progress=stage, cancel=cancel)
     clock.done()
-    stage = clock.stage("fit")
-    fits, crossings = _fit_paths(topology, grid, views, grid.radius, up, settings, stage, cancel)
-    clock.done()
-    warnings = list(warnings) + list(topology.warnings)
-    return fits, crossings, grid.radius, warnings
+    return grid, topology, list(warnings) + list(topology.warnings)
 
 
-def _finish(parts, views, diameter, length, estimated, clock):
-    fits, crossings, carved_radius, warnings = parts
-    radius = measure_radius([fit.points for fit in fits], views) or carved_radius
-    scale = _scale_factor(fits, radius, diameter, length)
-    cameras = [view.camera for view in views]
+def _finish(fits, crossings, state, clock):
+    warnings = list(state.warnings)
+    radius = measure_radius([fit.points for fit in fits], state.views) or state.carved_radius
+    scale = _scale_factor(fits, radius, state.diameter, state.length)
+    cameras = [view.camera for view in state.views]
     units = "model"
     if scale is not None:
         similarity = Similarity(scale=scale, R=np.eye(3), t=np.zeros(3))
@@ -398,10 +506,10 @@ def _finish(parts, views, diameter, length, estimated, clock):
         radius, units = radius * scale, "m"
     else:
         fits_points = [fit.points for fit in fits]
-        if estimated:
+        if state.estimated:
             warnings.append("the cameras were estimated, so the scale is arbitrary: give "
                             "--diameter or --length for metres")
     paths = [CablePath(points, closed=fit.closed) for points, fit in zip(fits_points, fits)]
     clock.progress(1.0, "done")
     return Result(radius=radius, paths=paths, crossings=crossings, cameras=cameras, units=units,
-                  warnings=warnings, timings=dict(clock.timings))
+                  warnings=warnings, timings=dict(clock.timings), colour=state.colour)

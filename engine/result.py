@@ -140,6 +140,9 @@ class Result:
     warnings : tuple of str
     timings : dict
         Seconds per stage.
+    colour : tuple of float or None
+        The cable's colour as seen in the frames (sRGB, 0 to 1), when known; an optional
+        field of the format (``"colour": [r, g, b]``).
     """
 
     radius: float
@@ -149,6 +152,7 @@ class Result:
     units: str = "model"
     warnings: tuple = ()
     timings: dict = field(default_factory=dict)
+    colour: tuple = None
 
     def __post_init__(self):
         if not (isinstance(self.radius, (int, float)) and math.isfinite(self.radius)
@@ -161,6 +165,11 @@ class Result:
             object.__setattr__(self, name, tuple(getattr(self, name)))
         if not self.paths:
             raise ValueError("a result needs at least one path")
+        if self.colour is not None:
+            colour = tuple(float(c) for c in self.colour)
+            if len(colour) != 3 or not all(0.0 <= c <= 1.0 for c in colour):
+                raise ValueError("colour must be three numbers in [0, 1] (sRGB)")
+            object.__setattr__(self, "colour", colour)
         for k, crossing in enumerate(self.crossings):
             for role in ("over", "under"):
                 ref = getattr(crossing, role)
@@ -179,7 +188,7 @@ class Result:
                 entry["radii"] = path.radii.tolist()
             entry["closed"] = path.closed
             paths.append(entry)
-        return {
+        document = {
             "format": RESULT_FORMAT,
             "units": self.units,
             "radius": self.radius,
@@ -195,6 +204,9 @@ class Result:
             "warnings": list(self.warnings),
             "timings": {str(k): float(v) for k, v in self.timings.items()},
         }
+        if self.colour is not None:
+            document["colour"] = list(self.colour)
+        return document
 
 
 def _require(data, key, kind, where):
@@ -288,10 +300,16 @@ def result_from_dict(data):
     if not isinstance(timings, dict) or not all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in timings.values()):
         raise ResultFormatError("result.timings must map stage names to seconds")
+    colour = data.get("colour")
+    if colour is not None and not (
+            isinstance(colour, list) and len(colour) == 3
+            and all(isinstance(c, (int, float)) and not isinstance(c, bool) and 0 <= c <= 1
+                    for c in colour)):
+        raise ResultFormatError("result.colour must be [r, g, b] with numbers in [0, 1]")
     try:
         return Result(radius=float(radius), paths=tuple(paths), crossings=tuple(crossings),
                       cameras=tuple(cameras), units=units, warnings=tuple(warnings),
-                      timings=dict(timings))
+                      timings=dict(timings), colour=colour)
     except ValueError as error:  # cross-field checks (crossing indices) live in Result
         raise ResultFormatError(str(error)) from None
 

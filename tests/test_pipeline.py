@@ -14,7 +14,7 @@ from engine import Cancelled, InputError, read_result
 from engine.metrics import evaluate
 from engine.obj_export import tube_mesh, write_obj
 from engine.overlay import draw_overlay
-from engine.pipeline import reconstruct
+from engine.pipeline import reconstruct, run_reconstruction
 from engine.synthetic_scene import SceneSpec, make_scene, write_scene
 
 
@@ -30,9 +30,9 @@ def capture(tmp_path_factory):
 def result(capture):
     folder, _ = capture
     calls = []
-    result = reconstruct(folder / "images", cameras=folder / "sparse",
-                         progress=lambda fraction, message: calls.append(fraction))
-    return result, calls
+    state = run_reconstruction(folder / "images", cameras=folder / "sparse",
+                               progress=lambda fraction, message: calls.append(fraction))
+    return state.result, calls, state
 
 
 def run_engine(*args):
@@ -42,7 +42,7 @@ def run_engine(*args):
 
 def test_one_path_through_every_crossing_with_true_cameras(capture, result):
     _, scene = capture
-    result, calls = result
+    result, calls, _ = result
     metrics = evaluate(result, scene.truth)
     assert len(result.paths) == 1 and metrics.one_path
     assert metrics.crossings_right == metrics.crossings_total == 2
@@ -53,6 +53,31 @@ def test_one_path_through_every_crossing_with_true_cameras(capture, result):
     assert result.units == "model" and len(result.cameras) == 24
     assert set(result.timings) == {"masks", "cameras", "carving", "graph", "topology", "fit"}
     assert calls[-1] == pytest.approx(1.0) and all(a <= b + 1e-9 for a, b in zip(calls, calls[1:]))
+
+
+def test_flipping_a_crossing_refits_only_the_final_rod(capture, result):
+    _, scene = capture
+    original, _, state = result
+    up = np.array([0.0, 0.0, 1.0])
+    flipped = state.flip(0)
+    crossing = flipped.result.crossings[0]
+    over = flipped.result.paths[crossing.over.path].points[crossing.over.index]
+    under = flipped.result.paths[crossing.under.path].points[crossing.under.index]
+    before = original.crossings[0]
+    for now, then in ((crossing.over, before.under), (crossing.under, before.over)):
+        assert now.path == then.path and abs(now.index - then.index) <= 2
+    # the strand now listed on top is on top, with room for both: the fit moved the cable
+    assert (over - under) @ up > 1.5 * flipped.result.radius
+    metrics = evaluate(flipped.result, scene.truth)
+    assert metrics.crossings_right == 1 and metrics.one_path
+    assert set(flipped.result.timings) == {"fit"}
+    assert flipped.result.colour == original.colour is not None
+    back = flipped.flip(0).result
+    assert evaluate(back, scene.truth).crossings_right == 2
+    np.testing.assert_allclose(back.paths[0].points, original.paths[0].points,
+                               atol=0.05 * original.radius)
+    with pytest.raises(IndexError, match="no crossing 5"):
+        state.flip(5)
 
 
 def test_same_input_same_curve(capture, result):
@@ -146,7 +171,7 @@ def test_bad_options_and_cancel(capture, tmp_path):
 
 def test_obj_tube_and_overlay(capture, result, tmp_path):
     folder, _ = capture
-    result, _ = result
+    result, _, _ = result
     vertices, faces = tube_mesh(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), 0.1, sides=8)
     assert vertices.shape == (24, 3) and len(faces) == 2 * 8 + 2
     np.testing.assert_allclose(np.hypot(vertices[:, 1], vertices[:, 2]), 0.1)

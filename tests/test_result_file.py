@@ -32,6 +32,16 @@ def test_round_trip_keeps_everything(small_result, tmp_path):
     assert back.warnings == small_result.warnings and back.timings == {"carve": 1.5}
 
 
+def test_the_optional_colour_round_trips(small_result, tmp_path):
+    from dataclasses import replace
+
+    assert read_result(write_result(small_result, tmp_path / "a.json")).colour is None
+    coloured = replace(small_result, colour=(0.8, 0.1, 0.05))
+    assert read_result(write_result(coloured, tmp_path / "b.json")).colour == (0.8, 0.1, 0.05)
+    with pytest.raises(ValueError, match="colour"):
+        replace(small_result, colour=(2.0, 0.0, 0.0))
+
+
 def test_file_follows_the_documented_layout(small_result, tmp_path):
     data = json.loads(write_result(small_result, tmp_path / "r.json").read_text())
     assert data["format"] == RESULT_FORMAT
@@ -85,6 +95,8 @@ def _valid(small_result):
     (lambda d: d["cameras"][1].update(params=[1, 2, 3]), r"cameras\[1\].*takes 8 parameters"),
     (lambda d: d["cameras"][0].update(R=[[1, 0, 0], [0, 1, 0], [0, 0, 2]]), "not a rotation"),
     (lambda d: d.update(warnings="oops"), "warnings must be"),
+    (lambda d: d.update(colour=[1.0, 0.2]), "colour must be"),
+    (lambda d: d.update(colour=[1.0, 0.2, 255]), "colour must be"),
 ])
 def test_malformed_files_get_a_clear_message(small_result, tmp_path, mutate, message):
     data = _valid(small_result)
