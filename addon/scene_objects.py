@@ -7,12 +7,15 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-__all__ = ["build_cable_curve", "build_cameras", "OPENCV_TO_BLENDER_CAMERA"]
+__all__ = ["build_cable_curve", "build_bezier_curve", "build_cameras", "cable_material",
+           "remove_collection", "OPENCV_TO_BLENDER_CAMERA"]
 
 #: Flips an OpenCV camera (looking along +z, y down) into Blender's (looking along -z, y up).
 OPENCV_TO_BLENDER_CAMERA = Matrix(((1, 0, 0), (0, -1, 0), (0, 0, -1)))
 
 BEVEL_RESOLUTION = 4
+#: Segments per Bézier piece when Blender evaluates the curve (pieces are long: few knots).
+BEZIER_RESOLUTION = 24
 
 
 def build_cable_curve(result, name, collection):
@@ -33,13 +36,7 @@ def build_cable_curve(result, name, collection):
     -------
     bpy.types.Object
     """
-    curve = bpy.data.curves.new(name, type="CURVE")
-    curve.dimensions = "3D"
-    curve.twist_mode = "MINIMUM"
-    curve.bevel_mode = "ROUND"
-    curve.bevel_depth = result.radius
-    curve.bevel_resolution = BEVEL_RESOLUTION
-    curve.use_fill_caps = True
+    curve = _bevelled_curve(name, result.radius)
     for path in result.paths:
         spline = curve.splines.new("POLY")
         spline.points.add(len(path.points) - 1)
@@ -53,7 +50,89 @@ def build_cable_curve(result, name, collection):
     return obj
 
 
-def build_cameras(cameras, collection, *, name_prefix=""):
+def _bevelled_curve(name, radius):
+    curve = bpy.data.curves.new(name, type="CURVE")
+    curve.dimensions = "3D"
+    curve.twist_mode = "MINIMUM"
+    curve.bevel_mode = "ROUND"
+    curve.bevel_depth = radius
+    curve.bevel_resolution = BEVEL_RESOLUTION
+    curve.use_fill_caps = True
+    return curve
+
+
+def build_bezier_curve(result, curves, name, collection):
+    """Create a curve object of Bézier splines (one per path) with the cable as its bevel.
+
+    Parameters
+    ----------
+    result : engine.Result
+        Gives the radius (the bevel's depth).
+    curves : sequence of engine.bezier.BezierCurve
+        One per path, from :func:`engine.bezier.fit_result_curves`.
+    name : str
+    collection : bpy.types.Collection
+
+    Returns
+    -------
+    bpy.types.Object
+    """
+    curve = _bevelled_curve(name, result.radius)
+    curve.resolution_u = BEZIER_RESOLUTION
+    for bezier in curves:
+        spline = curve.splines.new("BEZIER")
+        points = spline.bezier_points
+        points.add(len(bezier.knots) - 1)
+        for point in points:  # aligned handles keep the curve smooth while it is edited
+            point.handle_left_type = point.handle_right_type = "ALIGNED"
+        for attribute, values in (("co", bezier.knots), ("handle_left", bezier.left),
+                                  ("handle_right", bezier.right)):
+            points.foreach_set(attribute, np.asarray(values, dtype=np.float32).ravel())
+        spline.use_cyclic_u = bezier.closed
+        spline.resolution_u = BEZIER_RESOLUTION
+    obj = bpy.data.objects.new(name, curve)
+    collection.objects.link(obj)
+    return obj
+
+
+def cable_material(name, colour):
+    """A material in the cable's colour (sRGB, 0 to 1), or a neutral grey when unknown."""
+    material = bpy.data.materials.new(name)
+    srgb = colour if colour is not None else (0.5, 0.5, 0.5)
+    linear = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in srgb]
+    material.diffuse_color = (*linear, 1.0)
+    if material.node_tree is None and hasattr(material, "use_nodes"):
+        material.use_nodes = True
+    nodes = material.node_tree.nodes if material.node_tree else ()
+    for node in nodes:
+        if node.type == "BSDF_PRINCIPLED":
+            node.inputs["Base Color"].default_value = (*linear, 1.0)
+            node.inputs["Roughness"].default_value = 0.45
+    return material
+
+
+def remove_collection(collection):
+    """Delete a collection with its objects, their data and materials (unless used elsewhere)."""
+    stores = {"CURVE": bpy.data.curves, "CAMERA": bpy.data.cameras, "MESH": bpy.data.meshes}
+    for child in list(collection.children):
+        remove_collection(child)
+    for obj in list(collection.objects):
+        data, store = obj.data, stores.get(obj.type)
+        materials = [m for m in getattr(data, "materials", ()) if m is not None]
+        images = [b.image for b in getattr(data, "background_images", ()) if b.image]
+        bpy.data.objects.remove(obj)
+        if store is not None and data.users == 0:
+            store.remove(data)
+        for material in materials:
+            if material.users == 0:
+                bpy.data.materials.remove(material)
+        for image in images:
+            if image.users == 0:
+                bpy.data.images.remove(image)
+    bpy.data.collections.remove(collection)
+
+
+def build_cameras(cameras, collection, *, name_prefix="", frames=None):
     """Create one Blender camera object per engine camera, matching its projection.
 
     Focal length and principal point become lens and shift on a 36 mm sensor fitted to the
@@ -65,6 +144,8 @@ def build_cameras(cameras, collection, *, name_prefix=""):
     cameras : sequence of engine.Camera
     collection : bpy.types.Collection
     name_prefix : str, optional
+    frames : mapping of str to path, optional
+        Frame file per camera name: shown as the camera's background image.
 
     Returns
     -------
@@ -86,6 +167,12 @@ def build_cameras(cameras, collection, *, name_prefix=""):
         obj.matrix_world = Matrix.Translation(camera.center.tolist()) @ rotation.to_4x4()
         obj["cable_recon_image"] = camera.name
         obj["cable_recon_resolution"] = (camera.width, camera.height)
+        frame = (frames or {}).get(camera.name)
+        if frame is not None:
+            background = data.background_images.new()
+            background.image = bpy.data.images.load(str(frame), check_existing=True)
+            background.alpha = 0.8
+            data.show_background_images = True
         collection.objects.link(obj)
         objects.append(obj)
     return objects

@@ -11,7 +11,8 @@ from . import __version__
 from .errors import Cancelled, InputError, ReconstructionError
 from .settings_cli import add_settings_arguments, settings_from_arguments
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "add_reconstruct_arguments", "reconstruct_arguments",
+           "run_with_exit_code", "ProgressBar"]
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_FAILED = 0, 2, 3
 log = logging.getLogger(__name__)
@@ -62,14 +63,53 @@ def _run_cameras(args):
     log.info("%d cameras written to %s", len(estimate.cameras), args.output)
 
 
+def add_reconstruct_arguments(parser):
+    """The inputs and options of a reconstruction, shared by ``reconstruct`` and the add-on's
+    ``blender --command`` entry (read back with :func:`reconstruct_arguments`)."""
+    from .carving import CarvingSettings
+    from .segmentation import SegmentationSettings
+
+    parser.add_argument("images", help="folder of .jpg/.png frames, or a video")
+    parser.add_argument("--cameras", metavar="MODEL_DIR",
+                        help="COLMAP model (text or binary) of the frames, used as is "
+                             "(default: estimate the cameras)")
+    parser.add_argument("--masks", metavar="MASKS_DIR",
+                        help="masks written by 'segment' (possibly edited), used instead of "
+                             "segmenting")
+    scale = parser.add_mutually_exclusive_group()
+    scale.add_argument("--diameter", type=float, metavar="MM",
+                       help="the cable's measured diameter in mm: the result is in metres")
+    scale.add_argument("--length", type=float, metavar="M",
+                       help="the cable's length in metres: the result is in metres")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    parser.add_argument("--hsv", metavar="H1,S1,V1,H2,S2,V2",
+                        help="cable colour range (default: found on the reference frame)")
+    parser.add_argument("--reference-frame", type=int, default=0,
+                        help="frame the automatic colour is taken from (default 0)")
+    add_settings_arguments(parser, SegmentationSettings)
+    add_settings_arguments(parser, CarvingSettings)
+
+
+def reconstruct_arguments(args):
+    """Keyword arguments of :func:`engine.pipeline.run_reconstruction` from parsed arguments."""
+    from .carving import CarvingSettings
+    from .pipeline import PipelineSettings
+    from .segmentation import ColourRange, SegmentationSettings
+
+    settings = PipelineSettings(segmentation=settings_from_arguments(SegmentationSettings, args),
+                                carving=settings_from_arguments(CarvingSettings, args),
+                                reference_frame=args.reference_frame)
+    return dict(images=args.images, cameras=args.cameras, masks=args.masks,
+                colour=ColourRange.parse(args.hsv) if args.hsv else None,
+                diameter=args.diameter, length=args.length, settings=settings)
+
+
 def _run_reconstruct(args):
     from pathlib import Path
 
-    from .carving import CarvingSettings
     from .obj_export import write_obj
-    from .pipeline import PipelineSettings, reconstruct
+    from .pipeline import reconstruct
     from .result import write_result
-    from .segmentation import ColourRange, SegmentationSettings
 
     output = Path(args.output or Path(args.images).resolve().name + ".cable.json")
     for path in (output, Path(args.obj) if args.obj else None):
@@ -77,12 +117,7 @@ def _run_reconstruct(args):
             raise InputError(f"{path} exists (use --overwrite to replace it)")
         if path is not None and not path.resolve().parent.is_dir():
             raise InputError(f"{path.parent} is not a folder")
-    settings = PipelineSettings(segmentation=settings_from_arguments(SegmentationSettings, args),
-                                carving=settings_from_arguments(CarvingSettings, args),
-                                reference_frame=args.reference_frame)
-    result = reconstruct(args.images, cameras=args.cameras, masks=args.masks,
-                         colour=ColourRange.parse(args.hsv) if args.hsv else None,
-                         diameter=args.diameter, length=args.length, settings=settings,
+    result = reconstruct(**reconstruct_arguments(args),
                          progress=None if args.quiet else ProgressBar())
     write_result(result, output, overwrite=args.overwrite)
     if args.obj:
@@ -166,28 +201,10 @@ def build_parser():
         "reconstruct", parents=[quiet], help="reconstruct the cable as one continuous centreline",
         description="Reconstruct the cable(s) in the frames: a result JSON "
                     "(cable_recon.result/1) with one path per cable, its crossings and cameras.")
-    rebuild.add_argument("images", help="folder of .jpg/.png frames, or a video")
-    rebuild.add_argument("--cameras", metavar="MODEL_DIR",
-                         help="COLMAP model (text or binary) of the frames, used as is "
-                              "(default: estimate the cameras)")
-    rebuild.add_argument("--masks", metavar="MASKS_DIR",
-                         help="masks written by 'segment' (possibly edited), used instead of "
-                              "segmenting")
-    scale = rebuild.add_mutually_exclusive_group()
-    scale.add_argument("--diameter", type=float, metavar="MM",
-                       help="the cable's measured diameter in mm: the result is in metres")
-    scale.add_argument("--length", type=float, metavar="M",
-                       help="the cable's length in metres: the result is in metres")
+    add_reconstruct_arguments(rebuild)
     rebuild.add_argument("-o", "--output", metavar="RESULT_JSON",
                          help="result file (default: <images folder name>.cable.json here)")
     rebuild.add_argument("--obj", metavar="OBJ", help="also write the cable as an OBJ tube mesh")
-    rebuild.add_argument("--overwrite", action="store_true", help="replace existing outputs")
-    rebuild.add_argument("--hsv", metavar="H1,S1,V1,H2,S2,V2",
-                         help="cable colour range (default: found on the reference frame)")
-    rebuild.add_argument("--reference-frame", type=int, default=0,
-                         help="frame the automatic colour is taken from (default 0)")
-    add_settings_arguments(rebuild, SegmentationSettings)
-    add_settings_arguments(rebuild, CarvingSettings)
     rebuild.set_defaults(run=_run_reconstruct)
 
     bench = commands.add_parser(
@@ -214,18 +231,28 @@ def main(argv=None):
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        return args.run(args) or EXIT_OK
-    except InputError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except ReconstructionError as error:
-        print(f"reconstruction failed: {error}", file=sys.stderr)
-        return EXIT_FAILED
-    except FileExistsError as error:
-        print(f"error: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except (Cancelled, KeyboardInterrupt):
-        print("cancelled", file=sys.stderr)
-        return 130
+        return run_with_exit_code(args.run, args)
     finally:
         package_log.removeHandler(handler)
+
+
+def run_with_exit_code(run, *args, stream=None):
+    """Call ``run(*args)``; the exit code, with a one-line reason on ``stream`` on failure.
+
+    0 success (or what ``run`` returns), 2 bad input, 3 reconstruction failed, 130 cancelled.
+    """
+    stream = stream or sys.stderr
+    try:
+        return run(*args) or EXIT_OK
+    except InputError as error:
+        print(f"error: {error}", file=stream)
+        return EXIT_BAD_INPUT
+    except ReconstructionError as error:
+        print(f"reconstruction failed: {error}", file=stream)
+        return EXIT_FAILED
+    except FileExistsError as error:
+        print(f"error: {error}", file=stream)
+        return EXIT_BAD_INPUT
+    except (Cancelled, KeyboardInterrupt):
+        print("cancelled", file=stream)
+        return 130

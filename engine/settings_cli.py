@@ -3,10 +3,10 @@
 import dataclasses
 import re
 
-__all__ = ["add_settings_arguments", "settings_from_arguments"]
+__all__ = ["add_settings_arguments", "settings_from_arguments", "field_help"]
 
 
-def _help_texts(cls):
+def field_help(cls):
     """Per field, the first sentence of its numpydoc ``Attributes`` entry."""
     entries, current = {}, None
     for line in (cls.__doc__ or "").splitlines():
@@ -29,7 +29,7 @@ def _help_texts(cls):
 def add_settings_arguments(parser, cls, *, skip=()):
     """Add ``--field-name`` for every int/float/bool field of the dataclass ``cls``."""
     group = parser.add_argument_group(cls.__name__)
-    texts = _help_texts(cls)
+    texts = field_help(cls)
     for field in dataclasses.fields(cls):
         if field.name in skip or field.type not in (int, float, bool, "int", "float", "bool"):
             continue

@@ -39,7 +39,7 @@ def test_own_packages_are_imported_relatively(path):
 
 def test_library_code_never_prints():
     for path in ENGINE_FILES + ADDON_FILES:
-        if path.name in ("cli.py", "__main__.py"):
+        if path.name in ("cli.py", "__main__.py", "batch_command.py"):  # command lines
             continue
         tree = ast.parse(path.read_text())
         calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call)

@@ -8,12 +8,16 @@ import sys
 import tomllib
 import zipfile
 
+import numpy as np
 import pytest
 
 import package  # tools/package.py
 from conftest import ROOT
 from engine import __version__, read_result, write_result
+from engine.bezier import fit_result_curves
 from engine.ground_truth import read_ground_truth
+from engine.pipeline import reconstruct
+from engine.synthetic_scene import SceneSpec, make_scene, write_scene
 
 MANIFEST = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
 
@@ -92,10 +96,13 @@ def linux_zip(tmp_path_factory):
 def test_installed_through_blenders_installer(linux_zip, tmp_path):
     truth = read_ground_truth(ROOT / "samples" / "sequence" / "ground_truth.json")
     sample = write_result(truth.as_result(), tmp_path / "sample_cable.json")
+    capture = write_scene(make_scene(SceneSpec(crossings=1, seed=5, views=16, width=640,
+                                               height=480, image_format="jpg")),
+                          tmp_path / "loop")
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
     run = subprocess.run(
         [sys.executable, str(ROOT / "tests" / "blender_scripts" / "install_extension.py"),
-         str(linux_zip), str(sample)],
+         str(linux_zip), str(sample), str(capture), str(tmp_path / "loop.blend")],
         capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
     lines = [line for line in run.stdout.splitlines() if line.startswith("REPORT ")]
     assert run.returncode == 0 and lines, run.stdout[-3000:] + run.stderr[-3000:]
@@ -109,3 +116,14 @@ def test_installed_through_blenders_installer(linux_zip, tmp_path):
     assert report["curve"]["name"] == "sample_cable"
     assert report["curve"]["points"] == sum(len(p.points) for p in expected.paths)
     assert report["curve"]["bevel"] == pytest.approx(expected.radius)
+    # Reconstruct through the installed add-on agrees with the engine's API on the same capture
+    assert report["reconstruct"] == ["FINISHED"]
+    (curve,) = report["reconstructed"]
+    api = reconstruct(capture / "images", cameras=capture / "sparse")
+    curves, fit = fit_result_curves(api)
+    assert curve["name"] == "loop" and curve["type"] == "BEZIER"
+    assert curve["bevel"] == pytest.approx(api.radius, rel=1e-5)
+    assert curve["control_points"] == curve["reported"] == fit["control_points"]
+    np.testing.assert_allclose(curve["knots"], curves[0].knots, atol=1e-4 * api.radius)
+    assert curve["crossings"] == len(api.crossings) == 1
+    assert report["batch_exit"] == 0 and report["batch_objects"] == ["loop"]

@@ -1,6 +1,6 @@
 """Run in a fresh Python process with bpy: install the extension zip like a user, then use it.
 
-Usage: python install_extension.py EXTENSION_ZIP RESULT_JSON
+Usage: python install_extension.py EXTENSION_ZIP RESULT_JSON SCENE_DIR OUT_BLEND
 BLENDER_USER_RESOURCES must point at an empty folder. Prints one JSON line of findings.
 """
 
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import bpy
 
-zip_path, result_path = sys.argv[1:3]
+zip_path, result_path, scene_dir, out_blend = sys.argv[1:5]
 report = {"install": sorted(bpy.ops.extensions.package_install_files(
     filepath=zip_path, repo="user_default", enable_on_install=True))}
 module = "bl_ext.user_default.cable_reconstruction"
@@ -36,4 +36,26 @@ report["import_result"] = sorted(bpy.ops.cable_recon.import_result(filepath=resu
 curves = [o for o in bpy.data.objects if o.type == "CURVE"]
 report["curve"] = {"name": curves[0].name, "bevel": curves[0].data.bevel_depth,
                    "points": sum(len(s.points) for s in curves[0].data.splines)} if curves else None
+print("REPORT " + json.dumps(report))
+
+# The whole job through the installed extension: Reconstruct on a ground-truth capture with its
+# true cameras, then the batch command's handler (what `blender --command cable_recon` runs).
+bpy.ops.wm.read_homefile(use_empty=True)
+settings = bpy.context.scene.cable_recon
+settings.images = str(Path(scene_dir) / "images")
+settings.camera_source, settings.camera_model = "MODEL", str(Path(scene_dir) / "sparse")
+settings.scale, settings.with_cameras = "NONE", False
+report["reconstruct"] = sorted(bpy.ops.cable_recon.reconstruct())
+curves = [o for o in bpy.data.objects if o.type == "CURVE"]
+report["reconstructed"] = [{
+    "name": o.name, "bevel": o.data.bevel_depth, "type": o.data.splines[0].type,
+    "control_points": sum(len(s.bezier_points) for s in o.data.splines),
+    "reported": o.cable_recon.control_points, "crossings": len(o.cable_recon.crossings),
+    "knots": [list(p.co) for p in o.data.splines[0].bezier_points]} for o in curves]
+batch = sys.modules[module + ".addon.batch_command"]
+report["batch_exit"] = batch.handle_command(
+    ["reconstruct", str(Path(scene_dir) / "images"), "--cameras",
+     str(Path(scene_dir) / "sparse"), "-o", out_blend, "-q"])
+bpy.ops.wm.open_mainfile(filepath=out_blend)
+report["batch_objects"] = sorted(o.name for o in bpy.data.objects if o.type == "CURVE")
 print("REPORT " + json.dumps(report))

@@ -1,0 +1,78 @@
+"""``blender -b --command cable_recon reconstruct IMAGES -o out.blend [options]``.
+
+Registered with ``bpy.utils.register_cli_command``; the same handler runs with the bpy module
+from Python (``handle_command(["reconstruct", ...])``). Exit codes are the engine's: 0
+success, 2 bad input, 3 reconstruction failed, 130 cancelled.
+"""
+
+import argparse
+import sys
+from pathlib import Path
+
+import bpy
+
+from ..engine.bezier import BezierSettings
+from ..engine.cli import (EXIT_BAD_INPUT, ProgressBar, add_reconstruct_arguments,
+                          reconstruct_arguments, run_with_exit_code)
+from ..engine.errors import InputError
+from ..engine.settings_cli import add_settings_arguments, settings_from_arguments
+from .reconstruction import RunRequest, apply_outcome, reconstruct_work, sequence_name
+
+__all__ = ["COMMAND", "handle_command", "build_parser"]
+
+COMMAND = "cable_recon"
+
+
+def build_parser():
+    """The batch command's arguments (the engine's reconstruct options, plus the .blend)."""
+    parser = argparse.ArgumentParser(
+        prog=f"blender -b --command {COMMAND}",
+        description="Reconstruct a cable from photos into a .blend: a bevelled Bézier curve "
+                    "(and the cameras) in a collection named after the images' folder.")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    rebuild = commands.add_parser("reconstruct", help="images to a .blend",
+                                  description="Images to a .blend with the cable's curve.")
+    add_reconstruct_arguments(rebuild)
+    rebuild.add_argument("-o", "--output", required=True, metavar="BLEND",
+                         help="the .blend to write (never replaced without --overwrite)")
+    rebuild.add_argument("--no-cameras", action="store_true",
+                         help="leave the cameras out of the .blend")
+    rebuild.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    add_settings_arguments(rebuild, BezierSettings)
+    return parser
+
+
+def _reconstruct(args):
+    output = Path(args.output).resolve()
+    if output.suffix != ".blend":
+        raise InputError(f"{args.output}: the output must be a .blend file")
+    if output.exists() and not args.overwrite:
+        raise InputError(f"{args.output} exists (use --overwrite to replace it)")
+    if not output.parent.is_dir():
+        raise InputError(f"{output.parent} is not a folder")
+    engine = reconstruct_arguments(args)
+    images = str(Path(engine["images"]).resolve())
+    request = RunRequest(
+        images=images, name=sequence_name(images), cameras=engine["cameras"],
+        masks=engine["masks"], hsv=str(engine["colour"]) if engine["colour"] else None,
+        diameter=engine["diameter"], length=engine["length"], settings=engine["settings"],
+        curve=settings_from_arguments(BezierSettings, args), with_cameras=not args.no_cameras)
+    progress = (lambda fraction, message: None) if args.quiet else ProgressBar()
+    outcome = reconstruct_work(request)(progress, None)
+    obj = apply_outcome(bpy.context, request, outcome)
+    bpy.ops.wm.save_as_mainfile(filepath=str(output), check_existing=False, copy=True)
+    result = outcome.state.result
+    for warning in result.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    print(f"{obj.name}: {len(result.paths)} path(s), {len(result.crossings)} crossing(s), "
+          f"{outcome.report['control_points']} control points -> {output}", file=sys.stderr)
+
+
+def handle_command(argv):
+    """The ``--command`` handler: returns the process's exit code."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exit_:  # argparse printed the usage and the reason
+        return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
+    return run_with_exit_code(_reconstruct, args)

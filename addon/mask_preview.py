@@ -1,0 +1,127 @@
+"""The live mask preview: an image datablock the Image Editor shows while the colour is tuned.
+
+Every change of the folder, frame or colour re-segments the chosen frame (the decoded frame is
+cached) and rewrites the image's pixels; nothing happens until the preview was opened once.
+"""
+
+import logging
+import os
+import time
+from pathlib import Path
+
+import bpy
+
+from ..engine.colmap_model import natural_key
+from ..engine.errors import InputError
+from ..engine.image_sequence import IMAGE_SUFFIXES, read_image
+from ..engine.mask_preview import mask_preview
+from ..engine.segmentation import auto_colour
+
+__all__ = ["PREVIEW_IMAGE", "frame_paths", "frame_image", "refresh_preview", "show_preview"]
+
+PREVIEW_IMAGE = "Cable Mask Preview"
+log = logging.getLogger(__name__)
+_cache = {}  # (path, mtime) -> RGB frame; the last frame only
+
+
+def frame_paths(folder):
+    """The frames of ``folder`` in natural order (no check of their contents)."""
+    folder = Path(bpy.path.abspath(folder)) if folder else None
+    if folder is None or not folder.is_dir():
+        return []
+    return sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES),
+                  key=lambda p: natural_key(p.name))
+
+
+def frame_image(settings):
+    """The chosen frame (RGB) and its path; :class:`InputError` if there is none."""
+    paths = frame_paths(settings.images)
+    if not paths:
+        raise InputError(f"{settings.images or 'no folder'}: no .jpg or .png images")
+    path = paths[min(settings.frame, len(paths) - 1)]
+    key = (str(path), os.stat(path).st_mtime_ns)
+    if key not in _cache:
+        _cache.clear()
+        _cache[key] = read_image(path)
+    return _cache[key], path
+
+
+def _colour(settings, image):
+    from .properties import colour_range
+
+    colour = colour_range(settings)
+    return auto_colour(image) if colour is None else colour
+
+
+def refresh_preview(context, *, force=False):
+    """Rewrite the preview image from the current settings.
+
+    Does nothing unless the preview image exists (it was shown) or ``force``. Errors (no
+    frames, an unreadable frame) go into the window manager's status line, not exceptions:
+    this runs from property updates.
+
+    Returns
+    -------
+    float or None
+        Seconds it took, None if nothing was done.
+    """
+    image = bpy.data.images.get(PREVIEW_IMAGE)
+    if image is None and not force:
+        return None
+    started = time.perf_counter()
+    settings = context.scene.cable_recon
+    try:
+        frame, path = frame_image(settings)
+        preview = mask_preview(frame, _colour(settings, frame),
+                               _quality_segmentation(settings))
+    except (InputError, ValueError, OSError) as error:
+        context.window_manager.cable_recon_status = f"Preview: {error}"
+        return None
+    height, width = preview.pixels.shape[:2]
+    if image is None:
+        image = bpy.data.images.new(PREVIEW_IMAGE, width, height, alpha=False)
+    elif tuple(image.size) != (width, height):
+        image.scale(width, height)
+    image.pixels.foreach_set(preview.pixels.ravel())
+    image.update()
+    cable = ("no cable pixels: widen the range" if preview.width == 0 else
+             f"cable {preview.width:.1f} px wide, {100 * preview.cable_fraction:.1f}% of frame")
+    context.window_manager.cable_recon_status = f"{path.name}: {cable}"
+    for window in context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "IMAGE_EDITOR":
+                area.tag_redraw()
+    return time.perf_counter() - started
+
+
+def _quality_segmentation(settings):
+    from .settings_properties import settings_from_group
+
+    return settings_from_group(settings.segmentation)
+
+
+def show_preview(context):
+    """Make the preview and show it in an Image Editor (a new window if there is none).
+
+    Returns
+    -------
+    bpy.types.Image or None
+        None if the preview could not be made (the reason is in the status line).
+    """
+    refresh_preview(context, force=True)
+    image = bpy.data.images.get(PREVIEW_IMAGE)
+    if image is None:
+        return None
+    editors = [area for window in context.window_manager.windows
+               for area in window.screen.areas if area.type == "IMAGE_EDITOR"]
+    if not editors and context.window is not None and not bpy.app.background:
+        before = set(context.window_manager.windows[:])
+        bpy.ops.wm.window_new()
+        new = [w for w in context.window_manager.windows if w not in before]
+        if new:
+            area = new[0].screen.areas[0]
+            area.type = "IMAGE_EDITOR"
+            editors = [area]
+    for area in editors:
+        area.spaces.active.image = image
+    return image

@@ -1,0 +1,69 @@
+"""The live mask preview: a frame with the cable mask the current colour range gives.
+
+The add-on shows it in an Image Editor while the user tunes the cable colour, so it must be
+quick (``python -m engine bench preview`` measures it): one segmentation of the chosen frame
+and a composite, shrunk to at most ``max_side`` pixels.
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .segmentation import SegmentationSettings, segment_frame
+
+__all__ = ["MaskPreview", "mask_preview"]
+
+#: Colours of the composite (RGB, 0-255): junction pixels; the rest of the frame is dimmed.
+JUNCTION_COLOUR = (255, 0, 255)
+DIM = 0.3
+
+
+@dataclass(frozen=True, eq=False)
+class MaskPreview:
+    """A preview image and what the mask says.
+
+    Attributes
+    ----------
+    pixels : ndarray, shape (H, W, 4), float32
+        RGBA in 0..1, rows bottom-up (the order Blender's images use).
+    cable_fraction : float
+        Share of the frame's pixels on the cable.
+    width : float
+        The cable's width in pixels (0 without cable).
+    """
+
+    pixels: np.ndarray
+    cable_fraction: float
+    width: float
+
+
+def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side=1280):
+    """The frame dimmed to 30% with the cable at full brightness and junctions in magenta.
+
+    Parameters
+    ----------
+    image_rgb : ndarray, shape (H, W, 3), uint8
+    colour : ColourRange
+    settings : SegmentationSettings, optional
+    max_side : int, optional
+        The preview is shrunk so that its larger side is at most this.
+
+    Returns
+    -------
+    MaskPreview
+    """
+    segmentation = segment_frame(image_rgb, colour, settings)
+    composite = (image_rgb * DIM).astype(np.uint8)
+    np.copyto(composite, image_rgb, where=segmentation.mask[..., None])
+    composite[segmentation.junctions & segmentation.mask] = JUNCTION_COLOUR
+    height, width = composite.shape[:2]
+    scale = max_side / max(height, width)
+    if scale < 1.0:
+        composite = cv2.resize(composite, (max(int(width * scale), 1),
+                                           max(int(height * scale), 1)),
+                               interpolation=cv2.INTER_AREA)
+    rgba = np.empty(composite.shape[:2] + (4,), dtype=np.float32)
+    np.multiply(composite[::-1], np.float32(1.0 / 255.0), out=rgba[..., :3])
+    rgba[..., 3] = 1.0
+    return MaskPreview(rgba, float(segmentation.mask.mean()), float(segmentation.width))
