@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.requirements-installed
 
-.PHONY: setup demo test package sample clean
+.PHONY: setup demo test package sample render bench-blender clean
 
 setup: $(STAMP)
 
@@ -26,6 +26,14 @@ test: setup
 # Re-render the realistic sample with Cycles (slow: about 40 s a frame; never run by CI).
 sample: setup
 	$(PY) tools/render_sample.py --output samples/sequence --overwrite
+
+# docs/result.jpg: the demo's curve rendered with Cycles over its photo (after make demo).
+render: setup
+	$(PY) tools/render_result.py
+
+# The add-on's live preview and operators with real bpy (tables; see README).
+bench-blender: setup
+	$(PY) tools/bench_blender.py
 
 package: setup
 	$(PY) tools/package.py --output-dir dist

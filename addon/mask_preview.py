@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import bpy
+import cv2
 
 from ..engine.colmap_model import natural_key
 from ..engine.errors import InputError
@@ -21,7 +22,12 @@ __all__ = ["PREVIEW_IMAGE", "frame_paths", "frame_image", "refresh_preview", "sh
 
 PREVIEW_IMAGE = "Cable Mask Preview"
 log = logging.getLogger(__name__)
-_cache = {}  # (path, mtime) -> RGB frame; the last frame only
+_cache = {}  # (path, mtime, reduction) -> RGB frame: the last frame, full and for preview
+_sizes = {}  # folder -> (width, height) of its frames, once one was decoded at full size
+#: The preview's larger side (larger frames are decoded at 1/2, 1/4 or 1/8 of their size).
+PREVIEW_SIDE = 1280
+_REDUCED = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2,
+            4: cv2.IMREAD_REDUCED_COLOR_4, 8: cv2.IMREAD_REDUCED_COLOR_8}
 
 
 def frame_paths(folder):
@@ -33,16 +39,38 @@ def frame_paths(folder):
                   key=lambda p: natural_key(p.name))
 
 
-def frame_image(settings):
-    """The chosen frame (RGB) and its path; :class:`InputError` if there is none."""
+def frame_image(settings, *, max_side=None):
+    """The chosen frame (RGB) and its path; :class:`InputError` if there is none.
+
+    With ``max_side``, the frame is decoded at the largest reduction (1/2, 1/4, 1/8) that
+    keeps its larger side at least ``max_side``: a 4K JPEG decodes several times faster at a
+    quarter of its size.
+    """
     paths = frame_paths(settings.images)
     if not paths:
         raise InputError(f"{settings.images or 'no folder'}: no .jpg or .png images")
     path = paths[min(settings.frame, len(paths) - 1)]
-    key = (str(path), os.stat(path).st_mtime_ns)
+    size = _sizes.get(str(path.parent))
+    if max_side and size is None:  # an eighth-size decode is quick and tells the size
+        small = cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_8)
+        if small is not None:
+            size = _sizes[str(path.parent)] = (8 * small.shape[1], 8 * small.shape[0])
+    reduction = 1
+    if max_side and size:
+        reduction = max(f for f in _REDUCED if max(size) / f >= max_side or f == 1)
+    key = (str(path), os.stat(path).st_mtime_ns, reduction)
     if key not in _cache:
-        _cache.clear()
-        _cache[key] = read_image(path)
+        if reduction == 1:
+            frame = read_image(path)
+            _sizes[str(path.parent)] = frame.shape[1::-1]
+        else:
+            data = cv2.imread(str(path), _REDUCED[reduction])
+            if data is None:
+                raise InputError(f"{path} cannot be read as an image")
+            frame = cv2.cvtColor(data, cv2.COLOR_BGR2RGB)
+        for old in [k for k in _cache if k[2] == reduction or k[:2] != key[:2]]:
+            del _cache[old]
+        _cache[key] = frame
     return _cache[key], path
 
 
@@ -71,9 +99,9 @@ def refresh_preview(context, *, force=False):
     started = time.perf_counter()
     settings = context.scene.cable_recon
     try:
-        frame, path = frame_image(settings)
+        frame, path = frame_image(settings, max_side=PREVIEW_SIDE)
         preview = mask_preview(frame, _colour(settings, frame),
-                               _quality_segmentation(settings))
+                               _quality_segmentation(settings), max_side=PREVIEW_SIDE)
     except (InputError, ValueError, OSError) as error:
         context.window_manager.cable_recon_status = f"Preview: {error}"
         return None

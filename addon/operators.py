@@ -57,6 +57,8 @@ class _BackgroundWork:
         return self._end(context, step_of(job.run_here(), self._title))
 
     def invoke(self, context, event):
+        if context.window is None or bpy.app.background:  # no event loop: block
+            return self.execute(context)
         try:
             work, self._finish = self.prepare(context)
         except (InputError, ValueError) as error:

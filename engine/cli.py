@@ -146,6 +146,12 @@ def _run_bench(args):
         from .rod_benchmark import bench_rod
 
         rows = bench_rod()
+    elif args.stage in ("preview", "curve", "cancel"):
+        from . import interactive_benchmark
+
+        bench = getattr(interactive_benchmark, f"bench_{args.stage}")
+        rows = bench(sample=args.sample, **({"views": args.views} if args.stage == "curve"
+                                             else {}))
     else:
         from .pipeline_benchmark import bench_pipeline
 
@@ -210,7 +216,8 @@ def build_parser():
     bench = commands.add_parser(
         "bench", parents=[quiet], help="measure a stage's accuracy and speed on ground-truth scenes",
         description="Print a table: one row per ground-truth scene.")
-    bench.add_argument("stage", choices=["segment", "cameras", "carve", "rod", "pipeline"])
+    bench.add_argument("stage", choices=["segment", "cameras", "carve", "rod", "pipeline",
+                                         "preview", "curve", "cancel"])
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")

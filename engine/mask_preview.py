@@ -30,7 +30,7 @@ class MaskPreview:
     cable_fraction : float
         Share of the frame's pixels on the cable.
     width : float
-        The cable's width in pixels (0 without cable).
+        The cable's width in pixels of the preview (0 without cable).
     """
 
     pixels: np.ndarray
@@ -47,22 +47,24 @@ def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side
     colour : ColourRange
     settings : SegmentationSettings, optional
     max_side : int, optional
-        The preview is shrunk so that its larger side is at most this.
+        A larger frame is shrunk so that its larger side is at most this before it is
+        segmented (the preview's mask is then the shrunk frame's; the reconstruction segments
+        every frame at full size).
 
     Returns
     -------
     MaskPreview
     """
+    height, width = image_rgb.shape[:2]
+    scale = max_side / max(height, width)
+    if scale < 1.0:  # segment the shrunk frame: every length is relative to the cable's width
+        image_rgb = cv2.resize(image_rgb, (max(int(width * scale), 1),
+                                           max(int(height * scale), 1)),
+                               interpolation=cv2.INTER_AREA)
     segmentation = segment_frame(image_rgb, colour, settings)
     composite = (image_rgb * DIM).astype(np.uint8)
     np.copyto(composite, image_rgb, where=segmentation.mask[..., None])
     composite[segmentation.junctions & segmentation.mask] = JUNCTION_COLOUR
-    height, width = composite.shape[:2]
-    scale = max_side / max(height, width)
-    if scale < 1.0:
-        composite = cv2.resize(composite, (max(int(width * scale), 1),
-                                           max(int(height * scale), 1)),
-                               interpolation=cv2.INTER_AREA)
     rgba = np.empty(composite.shape[:2] + (4,), dtype=np.float32)
     np.multiply(composite[::-1], np.float32(1.0 / 255.0), out=rgba[..., :3])
     rgba[..., 3] = 1.0

@@ -147,7 +147,7 @@ def test_reconstruct_makes_an_editable_bezier_that_agrees_with_the_api(
 
 def test_running_again_replaces_the_result(empty_scene, capture):
     configure(empty_scene, capture, with_cameras=False)
-    bpy.ops.cable_recon.reconstruct()
+    bpy.ops.cable_recon.reconstruct("INVOKE_DEFAULT")  # no window here: it blocks
     first = {o.name for o in bpy.data.objects}
     bpy.ops.cable_recon.reconstruct()
     assert {o.name for o in bpy.data.objects} == first == {"twist"}

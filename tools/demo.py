@@ -3,8 +3,11 @@
 Cameras are estimated with pycolmap (the sample's true cameras are only used to score), the
 cable's diameter (8 mm) scales the result to metres. Writes into build/demo/:
 
+    sample.blend        the add-on's batch command's output, as
+                        `blender -b --command cable_recon reconstruct IMAGES -o sample.blend
+                        --diameter 8` writes it: the cable as a bevelled Bézier curve with few
+                        control points, its material, the cameras with their frames
     sample.cable.json   the result (cable_recon.result/1)
-    sample.blend        the bevelled curve and the cameras, imported by the add-on
     overlay.png         the curve drawn over the first frame, crossings marked over/under
 
 and prints the accuracy against the sample's ground truth.
@@ -14,6 +17,7 @@ and prints the accuracy against the sample's ground truth.
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -35,13 +39,21 @@ def main():
 
     package = load_addon_package()
     package.register()
-    from cable_reconstruction.engine import evaluate, read_ground_truth, write_result
-    from cable_reconstruction.engine.cli import ProgressBar
+    from cable_reconstruction.addon.batch_command import handle_command
+    from cable_reconstruction.addon.reconstruction import sessions
+    from cable_reconstruction.engine import CablePath, evaluate, read_ground_truth, write_result
+    from cable_reconstruction.engine.bezier import fit_result_curves
     from cable_reconstruction.engine.image_sequence import read_image
     from cable_reconstruction.engine.overlay import draw_overlay
-    from cable_reconstruction.engine.pipeline import reconstruct
 
-    result = reconstruct(SAMPLE / "images", diameter=DIAMETER_MM, progress=ProgressBar())
+    bpy.ops.wm.read_homefile(use_empty=True)
+    blend = output / "sample.blend"
+    code = handle_command(["reconstruct", str(SAMPLE / "images"), "--diameter",
+                           str(DIAMETER_MM), "-o", str(blend), "--overwrite"])
+    if code != 0:
+        sys.exit(code)
+    obj = bpy.data.objects["sequence"]
+    result = sessions[obj.cable_recon.run].result
     source = write_result(result, output / "sample.cable.json", overwrite=True)
 
     import cv2
@@ -49,20 +61,16 @@ def main():
     camera = result.cameras[0]
     overlay = draw_overlay(read_image(SAMPLE / "images" / camera.name), result, camera)
     cv2.imwrite(str(output / "overlay.png"), cv2.cvtColor(overlay, cv2.COLOR_RGB2BGR))
-
-    bpy.ops.wm.read_homefile(use_empty=True)
-    if bpy.ops.cable_recon.import_result(filepath=str(source)) != {"FINISHED"}:
-        sys.exit(f"importing {source} failed")
-    obj = bpy.data.objects[source.stem]
-    blend = output / "sample.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    points = sum(len(spline.points) for spline in obj.data.splines)
+    points = sum(len(spline.bezier_points) for spline in obj.data.splines)
+    dense = sum(len(path.points) for path in result.paths)
     cameras = sum(1 for o in bpy.data.objects if o.type == "CAMERA")
 
     truth = read_ground_truth(SAMPLE / "ground_truth.json")
     metrics = evaluate(result, truth, align=True)
-    print(f"{blend}: curve {obj.name!r}, {len(obj.data.splines)} spline(s), {points} points, "
-          f"bevel {obj.data.bevel_depth * 1000:.2f} mm, {cameras} cameras")
+    print(f"{blend}: curve {obj.name!r}, {len(obj.data.splines)} Bezier spline(s), {points} "
+          f"control points (the reconstruction has {dense} points; the curve stays within "
+          f"{obj.cable_recon.max_error:.3f} r of it), bevel {obj.data.bevel_depth * 1000:.2f} "
+          f"mm, {cameras} cameras")
     print(f"{source}, {output / 'overlay.png'}")
     for warning in result.warnings:
         print(f"warning: {warning}")
@@ -71,6 +79,12 @@ def main():
           f"completeness {metrics.completeness:.3f}, one path: {metrics.one_path}, "
           f"crossings right {metrics.crossings_right}/{metrics.crossings_total}, "
           f"radius {result.radius * 1000:.2f} mm (true {truth.radius * 1000:.2f} mm)")
+    curves, _ = fit_result_curves(result)
+    editable = replace(result, paths=[CablePath(c.sample(16), closed=c.closed) for c in curves],
+                       crossings=())
+    curve_metrics = evaluate(editable, truth, align=True)
+    print(f"  the Bezier curve itself: accuracy mean {curve_metrics.accuracy_mean:.3f} r, "
+          f"p95 {curve_metrics.accuracy_p95:.3f} r")
     print("  seconds per stage: " + ", ".join(f"{k} {v:.1f}" for k, v in result.timings.items()))
     package.unregister()
 
