@@ -16,7 +16,7 @@ from engine.errors import Cancelled, ReconstructionError
 from engine.metrics import evaluate
 from engine.segment_graph import SegmentGraph, extract_segment_graph
 from engine.segmentation import auto_colour, segment_frame
-from engine.settings_cli import _help_texts
+from engine.settings_cli import field_help
 from engine.synthetic_scene import SceneSpec, make_scene
 from engine.topology import (Topology, TopologySettings, TopologyView, resolve_topology)
 
@@ -464,6 +464,6 @@ def test_the_rendered_sample_gets_every_crossing_right_with_images_loaded_lazily
 
 
 def test_every_setting_is_documented():
-    texts = _help_texts(TopologySettings)
+    texts = field_help(TopologySettings)
     for name in TopologySettings.__dataclass_fields__:
         assert len(texts.get(name, "")) > 10, name
