@@ -23,6 +23,10 @@ import numpy as np
 from .errors import InputError
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 
+#: :func:`refine_edges` takes the cable's and the background's colours from every this many
+#: of their pixels.
+_EDGE_SAMPLE = 7
+
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "auto_colour",
            "colour_at", "segment_frame", "cable_mask", "refine_edges", "cable_width", "junction_map",
            "junction_centres"]
@@ -344,21 +348,23 @@ def _refine_edges(mask, image_rgb, settings):
                         contrast=settings.edge_contrast)
 
 
-def _sample(image, map_x, map_y):
-    """``image`` (float32) at points ``(map_x, map_y)``, bilinear (any number of points)."""
-    count, width = map_x.size, 4096
+def _chroma(rgb):
+    """Chromaticity: colours divided by their sum (the last axis)."""
+    rgb = np.asarray(rgb, dtype=np.float32)
+    return rgb / np.maximum(rgb.sum(axis=-1, keepdims=True), 1.0)
+
+
+def _sample(image, xs, ys):
+    """Values (float32) of ``image`` (one or three channels) at points ``(xs, ys)`` of any
+    shape, bilinear; shape ``xs.shape`` (+ ``(3,)``)."""
+    shape, count, width = np.shape(xs), np.size(xs), 4096
     pad = -count % width
-    xs = np.concatenate([map_x.ravel(), np.zeros(pad, np.float32)]).reshape(-1, width)
-    ys = np.concatenate([map_y.ravel(), np.zeros(pad, np.float32)]).reshape(-1, width)
-    values = cv2.remap(image, xs, ys, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return values.ravel()[:count].reshape(map_x.shape)
-
-
-def _sample_colour(image, xs, ys):
-    """Colours ``(N, 3)`` of ``image`` (float32) at points ``(xs, ys)``, bilinear."""
-    xs, ys = np.asarray(xs, np.float32)[:, None], np.asarray(ys, np.float32)[:, None]
-    return np.stack([_sample(np.ascontiguousarray(image[..., k]), xs, ys)[:, 0]
-                     for k in range(3)], axis=1)
+    grid = [np.concatenate([np.ravel(v).astype(np.float32), np.zeros(pad, np.float32)])
+            .reshape(-1, width) for v in (xs, ys)]
+    values = cv2.remap(image, grid[0], grid[1], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+    channels = image.shape[2:]
+    return values.reshape(-1, *channels)[:count].reshape(*shape, *channels).astype(np.float32)
 
 
 def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
@@ -366,16 +372,22 @@ def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
 
     A colour range puts the outline wherever a blurred edge pixel's hue, saturation and value
     happen to leave the range: on a light background it takes in pixels that are mostly
-    background, on a dark one (the cable's own shadow) it drops pixels that are mostly cable,
-    so the mask's centre shifts towards the light (by 0.08 r on the synthetic scenes, which
-    shifts the fitted centreline as much). A threshold between the cable's and the
-    background's colours fails too, as the cable darkens towards its outline and the table
-    darkens next to it. The edge itself does not depend on those levels: it is where the
-    image changes fastest across the outline. So each pixel within ``reach`` pixels of the
-    outline is cable when the edge lies outward of its centre: along the outline's normal, the
-    image projected on the local cable-minus-background colour (mask pixels at least ``reach``
-    inside, others at least ``reach`` outside, Gaussian-weighted) changes fastest beyond the
-    pixel's centre.
+    background, on a dark one (the cable's shade side and its shadow) it drops pixels that
+    are mostly cable. The mask's centre then shifts towards the light, on the synthetic
+    scenes by 0.08 r, and the fitted centreline with it. A threshold between the cable's
+    colour and the background's fails too: the cable darkens towards its outline, and the
+    table next to it. So each pixel within ``reach`` pixels of the outline is decided in two
+    steps, along the outline's normal through it:
+
+    1. The edge: where the chromaticity, projected on the cable's minus the background's,
+       changes fastest. Shading does not change chromaticity, so the cable's darkening
+       towards its outline does not move this edge (a dark side moves it by a fraction of
+       the blur, as a mix's chromaticity leans to its brighter part).
+    2. The pixel is cable when its colour is nearer the colour 1.5 pixels inside that edge
+       than the colour 1.5 pixels outside it: a blurred edge is half cable, half background.
+
+    A colourless cable (chromaticity as the background's) uses the colour projected on the
+    cable's minus the background's in step 1.
 
     Parameters
     ----------
@@ -384,8 +396,8 @@ def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
     reach : int, optional
         Pixels; the outline is searched within this distance of the colour range's.
     contrast : float, optional
-        Pixels whose local cable and background colours are nearer than this (RGB distance,
-        8-bit levels) keep their label.
+        Pixels whose colours inside and outside the edge differ by less than this (RGB
+        distance, 8-bit levels) keep their label.
 
     Returns
     -------
@@ -396,60 +408,55 @@ def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
     size = 2 * int(reach) + 1
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
     inner = cv2.erode(mask.view(np.uint8), kernel, borderType=cv2.BORDER_CONSTANT,
-                      borderValue=0)
-    outer = 1 - cv2.dilate(mask.view(np.uint8), kernel)
-    band = (inner == 0) & (outer == 0)
-    if not band.any():
+                      borderValue=0) > 0
+    outer = cv2.dilate(mask.view(np.uint8), kernel) == 0
+    if not (inner.any() and outer.any()):
         return mask
-    image = image_rgb.astype(np.float32)
-    sigma = float(reach)
-    window = 2 * int(math.ceil(3.0 * sigma)) + 1
-
-    def local_mean(where):
-        weight = cv2.GaussianBlur(where.astype(np.float32), (window, window), sigma)
-        total = cv2.GaussianBlur(image * where[..., None], (window, window), sigma)
-        return total / np.maximum(weight, 1e-6)[..., None], weight
-
-    cable, cable_weight = local_mean(inner)
-    background, background_weight = local_mean(outer)
-    spread = np.linalg.norm(cable - background, axis=2)
-    # one channel that shading does not change: the chromaticity along the local
-    # cable-minus-background chromaticity
-    def chroma(rgb):
-        return rgb / np.maximum(rgb.sum(axis=2, keepdims=True), 1.0)
-    across = chroma(cable) - chroma(background)
-    level = np.einsum("ijk,ijk->ij", chroma(image), across) \
-        / np.maximum(np.einsum("ijk,ijk->ij", across, across), 1e-6)
+    band = ~(inner | outer)
+    image = np.ascontiguousarray(image_rgb)
+    # the cable's and the background's colours: medians of (a sample of) the pixels a reach
+    # inside the outline and a reach outside it
+    ring = outer & (cv2.dilate(band.view(np.uint8), kernel) > 0)
+    cable_colour, background_colour = (
+        np.median(image[tuple(index[::_EDGE_SAMPLE] for index in np.nonzero(where))],
+                  axis=0).astype(np.float32) for where in (inner, ring))
     # outward normals of the outline
-    smooth = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), 1.0)
-    out_x, out_y = -cv2.Sobel(smooth, cv2.CV_32F, 1, 0), -cv2.Sobel(smooth, cv2.CV_32F, 0, 1)
-    rows, cols = np.nonzero(band & (cable_weight > 1e-3) & (background_weight > 1e-3)
-                            & (spread >= contrast))
-    norm = np.hypot(out_x[rows, cols], out_y[rows, cols])
-    usable = norm > 1e-6
+    smooth = cv2.blur(mask.view(np.uint8) * np.uint8(250), (5, 5))
+    out_x, out_y = -cv2.Sobel(smooth, cv2.CV_16S, 1, 0), -cv2.Sobel(smooth, cv2.CV_16S, 0, 1)
+    rows, cols = np.nonzero(band)
+    norm = np.hypot(out_x[rows, cols], out_y[rows, cols], dtype=np.float32)
+    usable = norm > 0
     rows, cols, norm = rows[usable], cols[usable], norm[usable]
-    nx, ny = out_x[rows, cols] / norm, out_y[rows, cols] / norm
-    # the level along the normal, every half pixel from -reach - 1/2 to reach + 1/2
-    steps = np.arange(-2 * reach - 1, 2 * reach + 2) * 0.5
-    map_x = (cols[:, None] + steps[None] * nx[:, None]).astype(np.float32)
-    map_y = (rows[:, None] + steps[None] * ny[:, None]).astype(np.float32)
-    profile = _sample(level, map_x, map_y)
-    # the level falls from cable to background: the steepest fall, to a fraction of a step
-    fall = profile[:, :-2] - profile[:, 2:]  # at steps[1:-1]
+    nx, ny = (out_x[rows, cols] / norm).astype(np.float32), (out_y[rows, cols] / norm).astype(np.float32)
+    # 1. the edge along the normal (samples a pixel apart from -reach - 1 to reach + 1)
+    across = _chroma(cable_colour) - _chroma(background_colour)
+    colourless = np.linalg.norm(across) < 0.05
+    steps = np.arange(-reach - 1, reach + 2, dtype=np.float32)
+    x, y = cols.astype(np.float32)[:, None], rows.astype(np.float32)[:, None]
+    red, green, blue = np.moveaxis(_sample(image, x + steps * nx[:, None],
+                                           y + steps * ny[:, None]), -1, 0)
+    if colourless:  # the colour itself
+        across = cable_colour - background_colour
+    level = across[0] * red + across[1] * green + across[2] * blue
+    if not colourless:
+        level /= np.maximum(red + green + blue, 1.0)
+    fall = level[:, :-2] - level[:, 2:]  # cable to background, at steps[1:-1]
     peak = np.clip(np.argmax(fall, axis=1), 1, fall.shape[1] - 2)
     index = np.arange(len(peak))
     before, centre, after = fall[index, peak - 1], fall[index, peak], fall[index, peak + 1]
     bend = before - 2.0 * centre + after
     offset = np.clip(0.5 * (before - after) / np.where(bend < 0, bend, -np.inf), -0.5, 0.5)
-    edge = steps[1:-1][peak] + 0.5 * offset
-    # the pixel is cable when its colour is nearer the cable's just inside that edge than the
-    # background's just outside it (a blurred edge is half and half at the edge)
-    inside = _sample_colour(image, cols + (edge - 1.5) * nx, rows + (edge - 1.5) * ny)
-    outside = _sample_colour(image, cols + (edge + 1.5) * nx, rows + (edge + 1.5) * ny)
+    edge = steps[1:-1][peak] + offset
+    # 2. half cable, half background
+    ends = np.stack([edge - 1.5, edge + 1.5], axis=1)
+    inside, outside = np.moveaxis(_sample(image, x + ends * nx[:, None],
+                                          y + ends * ny[:, None]), 1, 0)
     across = inside - outside
-    share = np.einsum("ij,ij->i", image[rows, cols] - outside, across)
+    spread = np.einsum("ij,ij->i", across, across)
+    share = np.einsum("ij,ij->i", image[rows, cols].astype(np.float32) - outside, across)
+    decided = spread >= contrast**2
     refined = mask.copy()
-    refined[rows, cols] = share >= 0.5 * np.einsum("ij,ij->i", across, across)
+    refined[rows[decided], cols[decided]] = share[decided] >= 0.5 * spread[decided]
     return refined
 
 
