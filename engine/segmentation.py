@@ -312,10 +312,10 @@ def cable_mask(image_rgb, colour, settings=SegmentationSettings()):
     cable, cable_hsv = mask[box], hsv[box]
     if settings.fill_highlights:
         cable = _fill_highlights(cable, cable_hsv, width)
-    if colour.has_hue:
-        cable = _correct_edges(cable, cable_hsv, settings)
     if settings.edge_reach > 0:
         cable = _refine_edges(cable, image_rgb[box], settings)
+    if colour.has_hue:
+        cable = _correct_edges(cable, cable_hsv, settings)
     mask[box] = cable
     return mask, cable_width(cable)
 
