@@ -133,8 +133,10 @@ def measure_radius(points, views, *, junction_margin=1.0):
     """The cable's radius from its width in the images, along a fitted centreline.
 
     In every view, each centreline point that projects inside the frame, on the cable and away
-    from junctions gives half the local width (the mask's distance transform at the point,
-    less a quarter pixel for pixel centres) times depth over focal length.
+    from junctions gives half the local width (the run of mask pixels through the point,
+    across the projected centreline, sampled every tenth of a pixel: a mask of the pixels
+    whose centres lie on the cable is as wide as the cable on average) times depth over
+    focal length.
 
     Parameters
     ----------
@@ -147,31 +149,56 @@ def measure_radius(points, views, *, junction_margin=1.0):
     Returns
     -------
     float or None
-        The median over every sample; None if there is none.
+        The mean of the middle half of the samples; None if there is none.
     """
-    points = np.concatenate([np.asarray(p, dtype=float) for p in points])
+    lines = [np.asarray(p, dtype=float) for p in points]
+    tangents = np.concatenate([np.gradient(line, axis=0) if len(line) > 1
+                               else np.zeros_like(line) for line in lines])
+    points = np.concatenate(lines)
     samples = []
     for view in views:
         camera = view.camera
         if not view.mask.any():
             continue
-        distance = cv2.distanceTransform(view.mask.view(np.uint8), cv2.DIST_L2,
-                                         cv2.DIST_MASK_PRECISE)
         width = cable_width(view.mask)
         grow = max(int(round(junction_margin * width)), 1)
         near_junction = cv2.dilate(view.junctions.view(np.uint8),
                                    np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)) > 0
         pixels, depth = camera.project(points)
+        ahead, _ = camera.project(points + tangents)
         with np.errstate(invalid="ignore"):
             col, row = np.floor(pixels[:, 0]), np.floor(pixels[:, 1])
             inside = ((depth > 0) & (col >= 0) & (row >= 0) & (col < camera.width)
                       & (row < camera.height))
         rows, cols = row[inside].astype(int), col[inside].astype(int)
-        usable = view.mask[rows, cols] & ~near_junction[rows, cols]
-        half = distance[rows, cols][usable] - 0.25
-        samples.append(half * depth[inside][usable] / np.mean(camera.focal))
+        usable = np.flatnonzero(inside)[view.mask[rows, cols] & ~near_junction[rows, cols]]
+        along = ahead[usable] - pixels[usable]
+        length = np.linalg.norm(along, axis=1)
+        usable, along = usable[length > 1e-9], along[length > 1e-9] / length[length > 1e-9,
+                                                                             None]
+        if not len(usable):
+            continue
+        normal = np.column_stack([-along[:, 1], along[:, 0]])
+        steps = np.arange(-int(np.ceil(20 * width)), int(np.ceil(20 * width)) + 1) * 0.1
+        trace = pixels[usable, None, :] + steps[None, :, None] * normal[:, None, :]
+        c, r = np.floor(trace[..., 0]).astype(int), np.floor(trace[..., 1]).astype(int)
+        on_frame = (c >= 0) & (r >= 0) & (c < camera.width) & (r < camera.height)
+        on = np.zeros(c.shape, dtype=bool)
+        on[on_frame] = view.mask[r[on_frame], c[on_frame]]
+        middle = len(steps) // 2
+        # the run through the point: the first sample off the cable on either side
+        after = np.argmin(on[:, middle:], axis=1)
+        before = np.argmin(on[:, middle::-1], axis=1)
+        closed = (after > 0) & (before > 0)  # the run ends within the samples on both sides
+        run = 0.1 * (after + before - 1)
+        samples.append(0.5 * run[closed] * depth[usable][closed] / np.mean(camera.focal))
     samples = np.concatenate(samples) if samples else np.zeros(0)
-    return float(np.median(samples)) if len(samples) else None
+    if not len(samples):
+        return None
+    # the middle half's mean: a run's length steps by whole pixels with the cable's position
+    # on the pixel grid, so a median would be off by up to half a pixel
+    low, high = np.percentile(samples, [25.0, 75.0])
+    return float(np.mean(samples[(samples >= low) & (samples <= high)]))
 
 
 class _Clock:
