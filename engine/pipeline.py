@@ -29,7 +29,7 @@ from .image_sequence import open_image_sequence, read_image
 from .metrics import Similarity
 from .progress import StageProgress, check_cancel
 from .result import CablePath, Crossing, Result, StrandRef
-from .rod_fit import Contact, ImageEvidence, RodFitSettings, Voxels, fit_rod
+from .rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
 from .segment_graph import SegmentGraphSettings, extract_segment_graph
 from .segmentation import (ColourRange, SegmentationSettings, auto_colour, cable_width,
                            junction_map, segment_frame)
@@ -267,15 +267,29 @@ def _cameras(sequence, cameras, settings, stage, cancel):
 
 
 def _fit_paths(topology, evidence, voxels, radius, up, settings, stage, cancel):
-    """One rod per path with contact at its crossings; crossings re-indexed into the fits."""
+    """One rod per path with contact at its crossings; crossings re-indexed into the fits.
+
+    Paths are fitted in order; where a path crosses one fitted before it, that one is held
+    fixed and the later path keeps its over/under clearance from it (:class:`Obstacle`).
+    """
     fits = []
+    span = settings.fit.contact_span * radius
     for number, path in enumerate(topology.paths):
         contacts = [Contact(over=c.over[1], under=c.under[1]) for c in topology.crossings
                     if c.over[0] == number and c.under[0] == number]
+        obstacles = []
+        for crossing in topology.crossings:
+            for mine, theirs, over in ((crossing.over, crossing.under, True),
+                                       (crossing.under, crossing.over, False)):
+                if mine[0] == number and theirs[0] < number:
+                    other = fits[theirs[0]]
+                    centre = other.points[other.vertex_of(theirs[1])]
+                    near = np.linalg.norm(other.points - centre, axis=1) <= span
+                    obstacles.append(Obstacle(mine[1], other.points[near], over))
         part = stage.part(number / len(topology.paths), (number + 1) / len(topology.paths))
         nearby = voxels.near(path.points, 4.0 * radius)
         fits.append(fit_rod(path.points, radius, voxels=nearby, views=evidence,
-                            contacts=contacts, closed=path.closed, up=up,
+                            contacts=contacts, obstacles=obstacles, closed=path.closed, up=up,
                             settings=settings.fit, progress=part, cancel=cancel))
     crossings = []
     for crossing in topology.crossings:

@@ -48,9 +48,9 @@ from .progress import StageProgress
 from .rod import Derivatives, ElasticEnergy, Rod, RodSettings, minimise_energy
 from .segmentation import cable_width
 
-__all__ = ["RodFitSettings", "Voxels", "ImageEvidence", "Contact", "RodFit", "fit_rod",
-           "resample_polyline", "assign_voxels", "voxel_attraction", "Springs",
-           "ImageAttraction", "ContactPenalty"]
+__all__ = ["RodFitSettings", "Voxels", "ImageEvidence", "Contact", "Obstacle", "RodFit",
+           "fit_rod", "resample_polyline", "assign_voxels", "voxel_attraction", "Springs",
+           "ImageAttraction", "ContactPenalty", "ObstaclePenalty"]
 
 #: Young's modulus the fit works with: it cancels out, as every weight is relative to bending.
 _FIT_MODULUS = 1e6
@@ -400,6 +400,26 @@ class Contact:
     under: object
 
 
+@dataclass(frozen=True, eq=False)
+class Obstacle:
+    """Another cable crossing this rod, held where it is (e.g. a cable fitted before).
+
+    Attributes
+    ----------
+    strand : int or tuple of int
+        This rod's strand at the crossing, as in :class:`Contact` (indices into the input
+        chain of :func:`fit_rod`).
+    points : ndarray, shape (K, 3)
+        The other cable's centreline near the crossing.
+    over : bool
+        This rod goes over the other cable there (else under it).
+    """
+
+    strand: object
+    points: np.ndarray
+    over: bool
+
+
 # -- energy terms -----------------------------------------------------------------------------
 class Springs:
     """Zero-length springs from vertices to fixed points, gathered per vertex.
@@ -692,6 +712,65 @@ class ContactPenalty:
         return delta @ self.up - self.gap, np.linalg.norm(across, axis=1) < self.gap
 
 
+class ObstaclePenalty:
+    """Keeps vertices ``gap`` above (or below) fixed points of another cable.
+
+    :class:`ContactPenalty` with the other strand held fixed: for each pair of a vertex
+    ``x_i`` and a fixed point ``q_k``, energy ``w f_ik max(0, gap - s (x_i - q_k) . up)**2``,
+    ``s`` = +1 where the rod goes over, -1 under, ``f`` fading with the horizontal distance.
+
+    Parameters
+    ----------
+    vertices : ndarray of int, shape (P,)
+    fixed : ndarray, shape (P, 3)
+        The fixed point of each pair.
+    signs : ndarray, shape (P,)
+    up : array_like, shape (3,)
+    gap, weight : float
+    """
+
+    name = "obstacles"
+
+    def __init__(self, vertices, fixed, signs, up, gap, weight):
+        self.vertices = np.asarray(vertices, dtype=np.int64).reshape(-1)
+        self.fixed = np.asarray(fixed, dtype=np.float64).reshape(-1, 3)
+        self.signs = np.asarray(signs, dtype=np.float64).reshape(-1)
+        up = np.asarray(up, dtype=np.float64)
+        self.up = up / np.linalg.norm(up)
+        self.gap, self.weight = gap, weight
+
+    def _heights(self, points):
+        return self.signs * ((points[self.vertices] - self.fixed) @ self.up)
+
+    def model(self, points):
+        """The penalty with the fading weights of the pairs fixed at ``points``."""
+        delta = points[self.vertices] - self.fixed
+        across = delta - np.outer(delta @ self.up, self.up)
+        fraction = np.sum(across**2, axis=1) / self.gap**2
+        fade = np.where(fraction < 1.0, (1.0 - fraction) ** 2, 0.0)
+        return _ObstacleModel(self, self.weight * fade)
+
+
+class _ObstacleModel:
+    def __init__(self, term, weights):
+        self.term, self.weights = term, weights
+
+    def energy(self, points):
+        short = np.maximum(self.term.gap - self.term._heights(points), 0.0)
+        return float(np.sum(self.weights * short**2))
+
+    def derivatives(self, points, *, exact=False):
+        term = self.term
+        short = np.maximum(term.gap - term._heights(points), 0.0)
+        push = -2.0 * (self.weights * short * term.signs)[:, None] * term.up
+        gradient = np.zeros_like(points)
+        np.add.at(gradient, term.vertices, push)
+        stiffness = 2.0 * np.where(short > 0, self.weights, 0.0)
+        blocks = stiffness[:, None, None] * np.outer(term.up, term.up)[None]
+        return Derivatives.from_blocks(self.energy(points), gradient, term.vertices[:, None],
+                                       blocks)
+
+
 class _ContactModel:
     def __init__(self, term, weights):
         self.term, self.weights = term, weights
@@ -773,6 +852,26 @@ def _strand_vertices(strand, input_arc, count, closed, span):
     return np.unique(vertices % count if closed else np.clip(vertices, 0, count - 1))
 
 
+def _obstacle_pairs(obstacles, input_arc, count, closed, settings):
+    """``(vertices, fixed points, signs)`` of all obstacles, on the rod's vertex numbering."""
+    span = int(math.ceil(settings.contact_span / settings.spacing))
+    vertices, fixed, signs = [], [], []
+    for obstacle in obstacles:
+        try:
+            strand = _strand_vertices(obstacle.strand, input_arc, count, closed, span)
+        except ValueError as error:
+            raise ValueError(f"bad obstacle strand {obstacle.strand}: {error}") from None
+        points = np.asarray(obstacle.points, dtype=np.float64).reshape(-1, 3)
+        grid = np.stack(np.meshgrid(np.arange(len(strand)), np.arange(len(points)),
+                                    indexing="ij"), -1).reshape(-1, 2)
+        vertices.append(strand[grid[:, 0]])
+        fixed.append(points[grid[:, 1]])
+        signs.append(np.full(len(grid), 1.0 if obstacle.over else -1.0))
+    if not vertices:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(vertices), np.concatenate(fixed), np.concatenate(signs)
+
+
 def _contact_pairs(contacts, input_arc, count, closed, settings):
     """``(over, under)`` vertex pairs of all contacts, on the rod's vertex numbering."""
     span = int(math.ceil(settings.contact_span / settings.spacing))
@@ -851,7 +950,7 @@ def _check_inputs(points, radius, voxels, views, settings):
 
 
 def _data_terms(chain, current, radius, voxels, views, contact_pairs, up, closed, settings,
-                unit, first_pass):
+                unit, first_pass, obstacle_pairs=None):
     """The fit's energy terms other than the rod's own, for one pass."""
     r = radius
     lengths = np.full(len(chain), settings.spacing)  # Voronoi lengths in r
@@ -872,10 +971,13 @@ def _data_terms(chain, current, radius, voxels, views, contact_pairs, up, closed
     if len(contact_pairs) and settings.contact_weight > 0:
         terms.append(ContactPenalty(contact_pairs, up, 2.0 * r * (1.0 + settings.contact_gap),
                                     settings.contact_weight * unit / r**2))
+    if obstacle_pairs is not None and len(obstacle_pairs[0]) and settings.contact_weight > 0:
+        terms.append(ObstaclePenalty(*obstacle_pairs, up, 2.0 * r * (1.0 + settings.contact_gap),
+                                     settings.contact_weight * unit / r**2))
     return terms
 
 
-def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), closed=False,
+def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), obstacles=(), closed=False,
             up=(0.0, 0.0, 1.0), settings=RodFitSettings(), progress=None, cancel=None):
     """Fit a discrete elastic rod to a cable's voxels and images.
 
@@ -892,6 +994,8 @@ def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), closed=False,
         One per view (:meth:`ImageEvidence.from_mask`).
     contacts : sequence of Contact, optional
         Crossings of the rod with itself and which strand is over (indices into ``points``).
+    obstacles : sequence of Obstacle, optional
+        Crossings with other cables, held fixed, and whether this rod goes over them.
     closed : bool, optional
         The cable is a loop.
     up : array_like, shape (3,), optional
@@ -921,6 +1025,7 @@ def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), closed=False,
     input_arc = _arc(points, False)
     input_arc = input_arc / (_arc(points, closed)[-1])
     pairs = _contact_pairs(tuple(contacts), input_arc, len(chain), closed, settings)
+    obstacle_pairs = _obstacle_pairs(tuple(obstacles), input_arc, len(chain), closed, settings)
     rod_settings = RodSettings(youngs_modulus=_FIT_MODULUS, max_iterations=settings.max_iterations,
                                step_tolerance=settings.step_tolerance, max_step=settings.max_step)
     unit = _FIT_MODULUS * math.pi * radius**4 / 4.0 / radius  # E I / r
@@ -930,7 +1035,7 @@ def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), closed=False,
         rod = Rod(current, radius, closed=closed, rest_lengths=rest)
         terms = [ElasticEnergy(rod, rod_settings),
                  *_data_terms(chain, current, radius, voxels, views, pairs, up, closed,
-                              settings, unit, index == 0)]
+                              settings, unit, index == 0, obstacle_pairs)]
         stage = StageProgress(progress).part(index / settings.passes,
                                              (index + 1) / settings.passes)
         result = minimise_energy(terms, current, length_scale=radius, settings=rod_settings,

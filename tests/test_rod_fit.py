@@ -15,7 +15,8 @@ from engine.carving import CarvingSettings, carve
 from engine.errors import Cancelled
 from engine.metrics import evaluate
 from engine.rod_benchmark import carve_stretch, noisy_chain, scene_masks
-from engine.rod_fit import (Contact, ContactPenalty, ImageAttraction, ImageEvidence, RodFitSettings,
+from engine.rod_fit import (Contact, ContactPenalty, ImageAttraction, ImageEvidence, Obstacle,
+                            ObstaclePenalty, RodFitSettings,
                             Springs, Voxels, fit_rod, resample_polyline, voxel_attraction)
 from engine.segmentation import cable_width, junction_map
 from engine.synthetic_scene import SceneSpec
@@ -189,6 +190,34 @@ def test_contact_given_as_index_ranges():
     fit = fit_rod(points, r, contacts=[contact])
     i, j = fit.vertex_of(second), fit.vertex_of(first)
     assert fit.points[i, 2] - fit.points[j, 2] > 1.9 * r
+
+
+@pytest.mark.parametrize("over", [True, False])
+def test_another_cable_held_fixed_is_cleared_on_the_requested_side(over):
+    r = 0.004
+    t = np.linspace(-30 * r, 30 * r, 121)
+    other = np.column_stack([t, np.zeros_like(t), np.full_like(t, r)])  # fitted before
+    mine = np.column_stack([np.zeros_like(t), t, np.full_like(t, r)])  # crosses it at 60
+    near = np.abs(t) <= 4 * r
+    fit = fit_rod(mine, r, obstacles=[Obstacle(60, other[near], over)])
+    centre = fit.points[fit.vertex_of(60)]
+    assert (centre[2] - r) * (1 if over else -1) > 1.9 * r
+    assert cKDTree(resample_polyline(fit.points, 0.01 * r)).query(other)[0].min() > 1.9 * r
+    plain = fit_rod(mine, r)
+    assert abs(plain.points[plain.vertex_of(60), 2] - r) < 0.1 * r  # without it they meet
+
+
+def test_obstacle_gradient_matches_finite_differences():
+    from conftest import finite_gradient
+
+    rng = np.random.default_rng(4)
+    points = rng.normal(size=(6, 3)) * 0.5
+    term = ObstaclePenalty([1, 2, 2, 4], rng.normal(size=(4, 3)) * 0.5, [1, -1, 1, -1],
+                           (0.0, 0.2, 1.0), 2.0, 3.0)
+    model = term.model(points)
+    derivatives = model.derivatives(points)
+    np.testing.assert_allclose(derivatives.gradient, finite_gradient(model.energy, points),
+                               atol=1e-6)
 
 
 # -- derivatives ---------------------------------------------------------------------------------
