@@ -345,9 +345,12 @@ def _furthest(fitter, first, stop):
 def fit_result_curves(result, *, settings=BezierSettings()):
     """Editable Bézier curves for every path of a result, crossings kept apart.
 
-    Each crossing's two samples become knots, and near a crossing the tolerance shrinks to
-    what keeps the strands ``crossing_gap`` radii apart (or as far apart as the
-    reconstruction has them, if that is less).
+    Each crossing's two samples become knots. Where the reconstruction's strands are less
+    than ``crossing_gap`` radii plus the tolerance apart, the curve is fitted to strands eased
+    apart (a smooth bump on each, along the line between them, of at most the tolerance), so
+    the curve keeps ``crossing_gap`` radii while it stays within the tolerance of the
+    reconstruction; near a crossing the tolerance left over is shared so the strands cannot
+    come back closer.
 
     Parameters
     ----------
@@ -365,33 +368,69 @@ def fit_result_curves(result, *, settings=BezierSettings()):
     """
     r = result.radius
     tolerance = settings.tolerance * r
-    breaks = [[] for _ in result.paths]
-    limits = [np.full(len(p.points), tolerance) for p in result.paths]
     reach = 4.0 * r
-    for crossing in result.crossings:
-        gap = _strand_gap(result, crossing, reach)
-        # each strand may move half the slack towards the other
-        allowed = max(0.5 * (gap - settings.crossing_gap * r), 0.02 * tolerance)
-        for ref in (crossing.over, crossing.under):
-            breaks[ref.path].append(ref.index)
-            near = _near_samples(result.paths[ref.path], ref.index, reach)
-            limits[ref.path][near] = np.minimum(limits[ref.path][near], allowed)
-    curves = [fit_bezier(path.points, tolerance=tolerance, closed=path.closed,
-                         breaks=breaks[number], tolerances=limits[number])
-              for number, path in enumerate(result.paths)]
+    gaps = [_strand_gap(result, crossing, reach) for crossing in result.crossings]
+    extra = np.zeros(len(gaps))
+    for _ in range(4):  # ease apart further wherever the curve still comes too close
+        curves = _fit_eased(result, gaps, extra, tolerance, reach, settings)
+        curve_gaps = np.array([_curve_gap(curves, result, crossing, reach,
+                                          settings.samples_per_piece)
+                               for crossing in result.crossings])
+        short = settings.crossing_gap * r - curve_gaps
+        if not np.any(short > 0):
+            break
+        extra = np.where(short > 0, extra + short + 0.01 * r, extra)
     errors = []
     for curve, path in zip(curves, result.paths):
         dense = curve.sample(settings.samples_per_piece)
         there = distance_to_polyline(dense, path.points, closed=path.closed).max()
         back = distance_to_polyline(path.points, dense, closed=path.closed).max()
         errors.append(max(there, back) / r)
-    gaps = []
-    for crossing in result.crossings:
-        curve_gap = _curve_gap(curves, result, crossing, reach, settings.samples_per_piece)
-        gaps.append((curve_gap / r, _strand_gap(result, crossing, reach) / r))
     report = {"control_points": int(sum(len(c.knots) for c in curves)),
-              "max_error": float(max(errors)), "crossing_gaps": gaps}
+              "max_error": float(max(errors)),
+              "crossing_gaps": [(float(c) / r, g / r) for c, g in zip(curve_gaps, gaps)]}
     return curves, report
+
+
+def _fit_eased(result, gaps, extra, tolerance, reach, settings):
+    """The curves of :func:`fit_result_curves` with each crossing's strands eased apart."""
+    r = result.radius
+    breaks = [[] for _ in result.paths]
+    limits = [np.full(len(p.points), tolerance) for p in result.paths]
+    targets = [np.array(p.points, dtype=float) for p in result.paths]
+    for crossing, gap, more in zip(result.crossings, gaps, extra):
+        # ease the strands apart so they are crossing_gap + tolerance apart, each by `push`
+        push = min(max(0.5 * (settings.crossing_gap * r + tolerance - gap), 0.0) + more,
+                   tolerance)
+        over = result.paths[crossing.over.path].points[crossing.over.index]
+        under = result.paths[crossing.under.path].points[crossing.under.index]
+        apart = (over - under) / max(np.linalg.norm(over - under), 1e-12 * r)
+        # each strand may then move half the slack towards the other, within the tolerance
+        allowed = max(min(0.5 * (gap + 2 * push - settings.crossing_gap * r),
+                          tolerance - push), 0.02 * tolerance)
+        for ref, sign in ((crossing.over, 1.0), (crossing.under, -1.0)):
+            breaks[ref.path].append(ref.index)
+            path = result.paths[ref.path]
+            offsets = _window(path, ref.index, reach)
+            where = (ref.index + offsets) % len(path.points)
+            arc = _arc_from(path, ref.index, offsets)
+            # flat over the middle half, easing out to nothing at `reach`
+            taper = np.clip((arc - 0.5 * reach) / (0.5 * reach), 0.0, 1.0)
+            weight = np.cos(0.5 * np.pi * taper) ** 2
+            targets[ref.path][where] += sign * push * weight[:, None] * apart
+            limits[ref.path][where] = np.minimum(limits[ref.path][where], allowed)
+    return [fit_bezier(targets[number], tolerance=tolerance, closed=path.closed,
+                       breaks=breaks[number], tolerances=limits[number])
+            for number, path in enumerate(result.paths)]
+
+
+def _arc_from(path, index, offsets):
+    """Arc length from sample ``index`` to each of ``index + offsets`` (offsets in order)."""
+    points, n = path.points, len(path.points)
+    where = (index + offsets) % n
+    steps = np.linalg.norm(np.diff(points[where], axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    return np.abs(arc - arc[list(offsets).index(0)])
 
 
 def _window(path, index, reach):

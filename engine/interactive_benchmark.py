@@ -100,8 +100,9 @@ def bench_curve(*, sample=DEFAULT_SAMPLE, views=30):
     return rows
 
 
-def bench_cancel(*, sample=DEFAULT_SAMPLE, delays=(0.3, 2.0, 4.5, 6.5, 8.0, 9.5)):
-    """Seconds from a cancel to the end of a reconstruction (cameras estimated), per stage."""
+def bench_cancel(*, sample=DEFAULT_SAMPLE, delays=(0.3, 2.0, 4.0, 5.5, 7.0, 8.5)):
+    """Seconds from a cancel to the end of a reconstruction (cameras estimated), per stage
+    (``stage``: the overall progress and the last message when the cancel came)."""
     from .pipeline import reconstruct
 
     images = Path(sample) / "images"
@@ -110,7 +111,7 @@ def bench_cancel(*, sample=DEFAULT_SAMPLE, delays=(0.3, 2.0, 4.5, 6.5, 8.0, 9.5)
         cancel, state = threading.Event(), {"stage": "start", "outcome": "finished"}
 
         def progress(fraction, message, state=state):
-            state["stage"] = message
+            state["stage"] = f"{100 * fraction:.0f}% {message}"
 
         def run(state=state, cancel=cancel):
             try:

@@ -88,7 +88,7 @@ def crossing_result(gap):
                   crossings=(Crossing([0, 0, 0], StrandRef(0, 40), StrandRef(1, 40)),))
 
 
-@pytest.mark.parametrize("gap", [2.05, 2.3])
+@pytest.mark.parametrize("gap", [1.94, 2.05, 2.3])
 def test_crossings_keep_two_radii_between_the_strands(gap):
     result = crossing_result(gap)
     curves, report = fit_result_curves(result)
