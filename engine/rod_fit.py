@@ -698,10 +698,7 @@ class ContactPenalty:
 
     def model(self, points):
         """The penalty with the fading weights of the pairs fixed at ``points``."""
-        delta = points[self.pairs[:, 0]] - points[self.pairs[:, 1]]
-        across = delta - np.outer(delta @ self.up, self.up)
-        fraction = np.sum(across**2, axis=1) / self.gap**2
-        fade = np.where(fraction < 1.0, (1.0 - fraction) ** 2, 0.0)
+        fade = _fade(points[self.pairs[:, 0]] - points[self.pairs[:, 1]], self.up, self.gap)
         return _ContactModel(self, self.weight * fade)
 
     def clearance(self, points):
@@ -744,14 +741,20 @@ class ObstaclePenalty:
 
     def model(self, points):
         """The penalty with the fading weights of the pairs fixed at ``points``."""
-        delta = points[self.vertices] - self.fixed
-        across = delta - np.outer(delta @ self.up, self.up)
-        fraction = np.sum(across**2, axis=1) / self.gap**2
-        fade = np.where(fraction < 1.0, (1.0 - fraction) ** 2, 0.0)
+        fade = _fade(points[self.vertices] - self.fixed, self.up, self.gap)
         return _ObstacleModel(self, self.weight * fade)
 
 
-class _ObstacleModel:
+def _fade(delta, up, gap):
+    """``(1 - (rho / gap)**2)**2`` for the horizontal part ``rho`` of ``delta`` (0 beyond)."""
+    across = delta - np.outer(delta @ up, up)
+    fraction = np.sum(across**2, axis=1) / gap**2
+    return np.where(fraction < 1.0, (1.0 - fraction) ** 2, 0.0)
+
+
+class _ClearanceModel:
+    """A clearance penalty with its fading weights fixed (energy; derivatives per kind)."""
+
     def __init__(self, term, weights):
         self.term, self.weights = term, weights
 
@@ -759,6 +762,8 @@ class _ObstacleModel:
         short = np.maximum(self.term.gap - self.term._heights(points), 0.0)
         return float(np.sum(self.weights * short**2))
 
+
+class _ObstacleModel(_ClearanceModel):
     def derivatives(self, points, *, exact=False):
         term = self.term
         short = np.maximum(term.gap - term._heights(points), 0.0)
@@ -771,14 +776,7 @@ class _ObstacleModel:
                                        blocks)
 
 
-class _ContactModel:
-    def __init__(self, term, weights):
-        self.term, self.weights = term, weights
-
-    def energy(self, points):
-        short = np.maximum(self.term.gap - self.term._heights(points), 0.0)
-        return float(np.sum(self.weights * short**2))
-
+class _ContactModel(_ClearanceModel):
     def derivatives(self, points, *, exact=False):
         term = self.term
         short = np.maximum(term.gap - term._heights(points), 0.0)
