@@ -13,7 +13,7 @@ operator ends on the spot and whatever the thread still returns is thrown away.
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 __all__ = ["BackgroundJob", "JobStatus", "ModalRun", "Step", "step_of"]
 
@@ -114,7 +114,7 @@ class BackgroundJob:
 
     def _set(self, **changes):
         with self._lock:
-            self._status = JobStatus(**{**self._status.__dict__, **changes})
+            self._status = replace(self._status, **changes)
 
     def _run(self):
         try:

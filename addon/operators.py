@@ -47,24 +47,27 @@ class _BackgroundWork:
         thread; raise :class:`InputError` or ``ValueError`` to refuse with a message."""
         raise NotImplementedError
 
-    def execute(self, context):
+    def _job(self, context):
+        """The work as a :class:`BackgroundJob`, or None (refused, reported)."""
         try:
             work, self._finish = self.prepare(context)
         except (InputError, ValueError) as error:
             self.report({"ERROR"}, str(error))
+            return None
+        return BackgroundJob(work, expected_errors=_EXPECTED, cancelled_errors=(Cancelled,))
+
+    def execute(self, context):
+        job = self._job(context)
+        if job is None:
             return {"CANCELLED"}
-        job = BackgroundJob(work, expected_errors=_EXPECTED, cancelled_errors=(Cancelled,))
         return self._end(context, step_of(job.run_here(), self._title))
 
     def invoke(self, context, event):
         if context.window is None or bpy.app.background:  # no event loop: block
             return self.execute(context)
-        try:
-            work, self._finish = self.prepare(context)
-        except (InputError, ValueError) as error:
-            self.report({"ERROR"}, str(error))
+        job = self._job(context)
+        if job is None:
             return {"CANCELLED"}
-        job = BackgroundJob(work, expected_errors=_EXPECTED, cancelled_errors=(Cancelled,))
         self._run = ModalRun(job, title=self._title)
         _active.add(self)
         step = self._run.start()

@@ -9,7 +9,7 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty
 
 from ..engine.settings_cli import field_help
 
-__all__ = ["property_group_for", "settings_from_group", "settings_to_group"]
+__all__ = ["property_group_for", "settings_from_group"]
 
 _KINDS = {int: int, float: float, bool: bool, "int": int, "float": float, "bool": bool}
 
@@ -65,9 +65,3 @@ def settings_from_group(group):
     """The engine dataclass a group (made by :func:`property_group_for`) describes."""
     cls = group.settings_class
     return cls(**{f.name: _value(group, f) for f in _simple_fields(cls)})
-
-
-def settings_to_group(settings, group):
-    """Copy a settings dataclass's values into its group (e.g. "reset to defaults")."""
-    for field in _simple_fields(type(settings)):
-        setattr(group, field.name, getattr(settings, field.name))

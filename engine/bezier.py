@@ -456,13 +456,6 @@ def _window(path, index, reach):
     return np.array(sorted(offsets))
 
 
-def _near_samples(path, index, reach):
-    """Mask of the samples of ``path`` within arc length ``reach`` of sample ``index``."""
-    mask = np.zeros(len(path.points), dtype=bool)
-    mask[(index + _window(path, index, reach)) % len(path.points)] = True
-    return mask
-
-
 def _strand(path, index, reach):
     """The polyline of ``path`` within arc length ``reach`` of sample ``index``, in order."""
     return path.points[(index + _window(path, index, reach)) % len(path.points)]

@@ -86,6 +86,7 @@ def bench_curve(*, sample=DEFAULT_SAMPLE, views=30):
                 CablePath(c.sample(16), closed=c.closed) for c in curves])
             gaps = np.array(report["crossing_gaps"]).reshape(-1, 2)
             points = sum(len(p.points) for p in result.paths)
+            curve_metrics = evaluate(editable, truth)
             rows.append({
                 "scene": label, "points": points, "control_points": report["control_points"],
                 "points_per_control": round(points / report["control_points"], 1),
@@ -94,8 +95,8 @@ def bench_curve(*, sample=DEFAULT_SAMPLE, views=30):
                 "reconstruction_min_gap_r": round(float(gaps[:, 1].min()), 2) if len(gaps)
                 else "",
                 "accuracy_mean": round(evaluate(result, truth).accuracy_mean, 3),
-                "curve_accuracy_mean": round(evaluate(editable, truth).accuracy_mean, 3),
-                "curve_accuracy_p95": round(evaluate(editable, truth).accuracy_p95, 3),
+                "curve_accuracy_mean": round(curve_metrics.accuracy_mean, 3),
+                "curve_accuracy_p95": round(curve_metrics.accuracy_p95, 3),
                 "fit_ms": round(1000 * seconds, 1)})
     return rows
 

@@ -300,7 +300,7 @@ def _cable_masks(image_rgb, colour, settings):
     """``(mask, colour-range mask, width)``: the cable mask with its outline refined
     (:func:`refine_edges`) and the mask before that, whose topology the junctions are read
     from (on the realistic sample, junctions from the refined outline put 12% of their pixels
-    away from any crossing; from the colour range's, 0.1%)."""
+    farther than 3 r from any crossing; from the colour range's mask, 3.5%)."""
     hsv = _hsv(image_rgb)
     raw = colour.select(hsv)
     # A symmetric kernel: an even one would shift the whole mask by a pixel.
