@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.requirements-installed
 
-.PHONY: setup demo test package sample render bench-blender clean
+.PHONY: setup demo test package sample sample-looks render bench-blender clean
 
 setup: $(STAMP)
 
@@ -26,6 +26,16 @@ test: setup
 # Re-render the realistic sample with Cycles (slow: about 40 s a frame; never run by CI).
 sample: setup
 	$(PY) tools/render_sample.py --output samples/sequence --overwrite
+
+# Re-render the held-out look captures in samples/looks (family:seed:crossings; 20 views at
+# 640x480 on one thread: about 6 min a capture on two shared cores; never run by CI).
+LOOK_CAPTURES := pale:1000:2 neutral:1005:4 hard_light:1001:3 air:1002:3 clutter:1002:5 \
+                 patterned:1000:6 same_hue:1002:4
+sample-looks: setup
+	@for spec in $(LOOK_CAPTURES); do set -- $$(echo $$spec | tr : ' '); \
+	  $(PY) tools/render_sample.py --output samples/looks/$$1-$$2 --look $$1 --look-seed $$2 \
+	    --seed $$2 --crossings $$3 --extent 0.42 --views 20 --size 640x480 --samples 16 \
+	    --threads 1 --overwrite || exit 1; done
 
 # docs/result.jpg: the demo's curve rendered with Cycles over its photo (after make demo).
 render: setup

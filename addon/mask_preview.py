@@ -13,10 +13,9 @@ import bpy
 import cv2
 
 from ..engine.colmap_model import natural_key
-from ..engine.errors import InputError
+from ..engine.errors import InputError, ReconstructionError
 from ..engine.image_sequence import IMAGE_SUFFIXES, read_image
 from ..engine.mask_preview import mask_preview
-from ..engine.segmentation import auto_colour
 
 __all__ = ["PREVIEW_IMAGE", "frame_paths", "frame_image", "refresh_preview", "show_preview"]
 
@@ -74,11 +73,11 @@ def frame_image(settings, *, max_side=None):
     return _cache[key], path
 
 
-def _colour(settings, image):
+def _colour(settings):
+    """The colour range set or picked, None for the automatic colour (found per preview)."""
     from .properties import colour_range
 
-    colour = colour_range(settings)
-    return auto_colour(image) if colour is None else colour
+    return colour_range(settings)
 
 
 def refresh_preview(context, *, force=False):
@@ -100,9 +99,9 @@ def refresh_preview(context, *, force=False):
     settings = context.scene.cable_recon
     try:
         frame, path = frame_image(settings, max_side=PREVIEW_SIDE)
-        preview = mask_preview(frame, _colour(settings, frame),
+        preview = mask_preview(frame, _colour(settings),
                                _quality_segmentation(settings), max_side=PREVIEW_SIDE)
-    except (InputError, ValueError, OSError) as error:
+    except (InputError, ReconstructionError, ValueError, OSError) as error:
         context.window_manager.cable_recon_status = f"Preview: {error}"
         return None
     height, width = preview.pixels.shape[:2]

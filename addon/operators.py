@@ -51,7 +51,7 @@ class _BackgroundWork:
         """The work as a :class:`BackgroundJob`, or None (refused, reported)."""
         try:
             work, self._finish = self.prepare(context)
-        except (InputError, ValueError) as error:
+        except (InputError, ReconstructionError, ValueError) as error:
             self.report({"ERROR"}, str(error))
             return None
         return BackgroundJob(work, expected_errors=_EXPECTED, cancelled_errors=(Cancelled,))
@@ -104,7 +104,7 @@ class _BackgroundWork:
         if step.action == FINISHED:
             try:
                 message = self._finish(context, step.value)
-            except (InputError, ValueError) as error:
+            except (InputError, ReconstructionError, ValueError) as error:
                 self.report({"ERROR"}, str(error))
                 return {"CANCELLED"}
             self.report({"INFO"}, message)
@@ -193,7 +193,7 @@ class CABLE_RECON_OT_pick_colour(bpy.types.Operator):
         try:
             frame, path = frame_image(settings)
             colour = colour_at(frame, self.x, self.y)
-        except (InputError, ValueError) as error:
+        except (InputError, ReconstructionError, ValueError) as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         set_colour_range(settings, colour)
@@ -262,7 +262,7 @@ class CABLE_RECON_OT_auto_colour(bpy.types.Operator):
         try:
             frame, path = frame_image(settings)
             colour = auto_colour(frame)
-        except (InputError, ValueError) as error:
+        except (InputError, ReconstructionError, ValueError) as error:
             self.report({"ERROR"}, str(error))
             return {"CANCELLED"}
         set_colour_range(settings, colour)

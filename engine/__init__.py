@@ -20,6 +20,7 @@ _LAZY = {
     "SegmentationSettings": "segmentation", "segment_frame": "segmentation",
     "auto_colour": "segmentation", "ColourRange": "segmentation",
     "CameraEstimationSettings": "camera_estimation", "estimate_cameras": "camera_estimation",
+    "MaskAgreementSettings": "mask_agreement", "agree_masks": "mask_agreement",
     "CarvingSettings": "carving", "VoxelGrid": "carving", "carve": "carving",
     "SegmentGraphSettings": "segment_graph", "SegmentGraph": "segment_graph",
     "extract_segment_graph": "segment_graph",

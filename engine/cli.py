@@ -39,7 +39,27 @@ class ProgressBar:
         self.last = line
 
 
+def _add_agreement_arguments(parser):
+    """``--no-agreement`` and the ``--agreement-*`` settings of the masks' agreement."""
+    from .mask_agreement import MaskAgreementSettings
+
+    parser.add_argument("--no-agreement", action="store_true",
+                        help="use each frame's mask as segmented, not checked against the "
+                             "other views (masks given with --masks always are)")
+    add_settings_arguments(parser, MaskAgreementSettings, prefix="agreement")
+
+
+def _agreement_settings(args):
+    from dataclasses import replace
+
+    from .mask_agreement import MaskAgreementSettings
+
+    settings = settings_from_arguments(MaskAgreementSettings, args, prefix="agreement")
+    return replace(settings, rounds=0) if args.no_agreement else settings
+
+
 def _run_segment(args):
+    from .carving import CarvingSettings
     from .segment_command import segment_sequence_to_folder
     from .segmentation import ColourRange, SegmentationSettings
 
@@ -47,7 +67,8 @@ def _run_segment(args):
     settings = settings_from_arguments(SegmentationSettings, args)
     colour, widths = segment_sequence_to_folder(
         args.images, args.output, colour=colour, settings=settings,
-        reference_frame=args.reference_frame, overwrite=args.overwrite,
+        reference_frame=args.reference_frame, overwrite=args.overwrite, cameras=args.cameras,
+        agreement=_agreement_settings(args), carving=settings_from_arguments(CarvingSettings, args),
         progress=None if args.quiet else ProgressBar())
     log.info("%d frames, cable %.1f-%.1f px wide, --hsv %s", len(widths), min(widths),
              max(widths), colour)
@@ -87,6 +108,7 @@ def add_reconstruct_arguments(parser):
     parser.add_argument("--reference-frame", type=int, default=0,
                         help="frame the automatic colour is taken from (default 0)")
     add_settings_arguments(parser, SegmentationSettings)
+    _add_agreement_arguments(parser)
     add_settings_arguments(parser, CarvingSettings)
 
 
@@ -97,6 +119,7 @@ def reconstruct_arguments(args):
     from .segmentation import ColourRange, SegmentationSettings
 
     settings = PipelineSettings(segmentation=settings_from_arguments(SegmentationSettings, args),
+                                agreement=_agreement_settings(args),
                                 carving=settings_from_arguments(CarvingSettings, args),
                                 reference_frame=args.reference_frame)
     return dict(images=args.images, cameras=args.cameras, masks=args.masks,
@@ -132,8 +155,13 @@ def _run_reconstruct(args):
 def _run_bench(args):
     from .benchmarks import bench_segment, format_table
 
-    if args.stage == "segment":
-        rows = bench_segment(sample=args.sample, views=args.views)
+    if args.stage in ("segment", "looks"):
+        from .look_benchmark import bench_looks
+
+        if args.stage == "segment":
+            print(format_table(bench_segment(sample=args.sample, views=args.views)))
+            print()
+        rows = bench_looks(seeds=args.seeds if args.stage == "looks" else 1)
     elif args.stage == "cameras":
         from .camera_estimation import bench_cameras
 
@@ -152,6 +180,11 @@ def _run_bench(args):
         bench = getattr(interactive_benchmark, f"bench_{args.stage}")
         rows = bench(sample=args.sample, **({"views": args.views} if args.stage == "curve"
                                              else {}))
+    elif args.stage == "pipeline-looks":
+        from .pipeline_benchmark import bench_pipeline_looks
+
+        rows = bench_pipeline_looks(seeds=args.seeds, progress=None if args.quiet
+                                    else ProgressBar())
     else:
         from .pipeline_benchmark import bench_pipeline
 
@@ -179,8 +212,10 @@ def build_parser():
 
     segment = commands.add_parser(
         "segment", parents=[quiet], help="write cable masks and junction maps of every frame",
-        description="Segment the cable in every frame: OUT/masks/*.png (cable = 255), "
-                    "OUT/junctions/*.png and OUT/contact_sheet.png for a quick look.")
+        description="Segment the cable in every frame and check each mask against the other "
+                    "views (cameras from --cameras, or estimated): OUT/masks/*.png (cable = "
+                    "255), OUT/junctions/*.png and OUT/contact_sheet.png for a quick look "
+                    "(red: removed, cyan: filled by the agreement across views).")
     segment.add_argument("images", help="folder of .jpg/.png frames, or a video")
     segment.add_argument("-o", "--output", required=True, help="output folder")
     colour = segment.add_mutually_exclusive_group()
@@ -191,7 +226,12 @@ def build_parser():
     segment.add_argument("--reference-frame", type=int, default=0,
                          help="frame the automatic colour is taken from (default 0)")
     segment.add_argument("--overwrite", action="store_true", help="replace existing masks")
+    segment.add_argument("--cameras", metavar="MODEL_DIR",
+                         help="COLMAP model (text or binary) of the frames, to agree the masks "
+                              "across views (default: estimate the cameras)")
     add_settings_arguments(segment, SegmentationSettings)
+    _add_agreement_arguments(segment)
+    add_settings_arguments(segment, CarvingSettings)
     segment.set_defaults(run=_run_segment)
 
     cameras = commands.add_parser(
@@ -216,9 +256,13 @@ def build_parser():
     bench = commands.add_parser(
         "bench", parents=[quiet], help="measure a stage's accuracy and speed on ground-truth scenes",
         description="Print a table: one row per ground-truth scene.")
-    bench.add_argument("stage", choices=["segment", "cameras", "carve", "rod", "pipeline",
-                                         "preview", "curve", "cancel"])
+    bench.add_argument("stage", choices=["segment", "looks", "cameras", "carve", "rod",
+                                         "pipeline", "pipeline-looks", "preview", "curve",
+                                         "cancel"])
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
+    bench.add_argument("--seeds", type=int, default=3,
+                       help="scenes per look family and seed set (segment, looks, "
+                            "pipeline-looks)")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")
     bench.set_defaults(run=_run_bench)

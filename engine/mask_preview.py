@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .segmentation import SegmentationSettings, segment_frame
+from .segmentation import SegmentationSettings, segment_frame, sequence_colour
 
 __all__ = ["MaskPreview", "mask_preview"]
 
@@ -44,7 +44,9 @@ def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side
     Parameters
     ----------
     image_rgb : ndarray, shape (H, W, 3), uint8
-    colour : ColourRange
+    colour : ColourRange or None
+        None: found automatically on this frame, as the reconstruction would
+        (:func:`.segmentation.sequence_colour`).
     settings : SegmentationSettings, optional
     max_side : int, optional
         A larger frame is shrunk so that its larger side is at most this before it is
@@ -61,7 +63,10 @@ def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side
         image_rgb = cv2.resize(image_rgb, (max(int(width * scale), 1),
                                            max(int(height * scale), 1)),
                                interpolation=cv2.INTER_AREA)
-    segmentation = segment_frame(image_rgb, colour, settings)
+    model = None
+    if colour is None:
+        colour, model = sequence_colour([image_rgb], None, settings)
+    segmentation = segment_frame(image_rgb, colour, settings, model=model)
     composite = (image_rgb * DIM).astype(np.uint8)
     np.copyto(composite, image_rgb, where=segmentation.mask[..., None])
     composite[segmentation.junctions & segmentation.mask] = JUNCTION_COLOUR

@@ -4,6 +4,8 @@ Stages, each timed in the result (DESIGN.md's data flow)::
 
     masks + junctions (§3.1)   segmented here, or read from a folder written by ``segment``
     cameras (§3.2)             a COLMAP model given as is, or estimated with pycolmap (upright)
+    agreement                  masks segmented here checked against what the other views
+                               carve: strays removed, breaks filled (``engine.mask_agreement``)
     carving (§3.2)             occupancy and junction voxels
     segment graph (§3.3)       junctions, ends and segments on the hull's core
     topology (§3.5)            which branch continues which, over/under, one path per cable
@@ -26,24 +28,25 @@ from .carving import CarvingSettings, carve
 from .colmap_model import read_colmap_model
 from .errors import InputError, ReconstructionError
 from .image_sequence import open_image_sequence, read_image
+from .mask_agreement import MaskAgreementSettings, agree_masks
 from .metrics import Similarity
 from .progress import StageProgress, check_cancel
 from .result import CablePath, Crossing, Result, StrandRef
 from .rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
 from .segment_graph import SegmentGraphSettings, extract_segment_graph
-from .segmentation import (ColourRange, SegmentationSettings, auto_colour, cable_width,
-                           junction_map, segment_frame)
+from .segmentation import (ColourRange, SegmentationSettings, cable_width, junction_map,
+                           reference_frames, segment_frame, sequence_colour)
 from .topology import TopologySettings, resolve_topology
 from .upright import UprightSettings, make_upright
 
 __all__ = ["PipelineSettings", "View", "Reconstruction", "reconstruct", "run_reconstruction",
-           "measure_radius", "read_masks", "cable_colour"]
+           "measure_radius", "read_masks", "cable_colour", "sequence_cameras"]
 
 log = logging.getLogger(__name__)
 
 #: Share of the progress bar per stage (cameras dominate when they are estimated).
-_STAGES = {"masks": 0.10, "cameras": 0.35, "carving": 0.15, "graph": 0.05, "topology": 0.15,
-           "fit": 0.20}
+_STAGES = {"masks": 0.10, "cameras": 0.35, "agreement": 0.15, "carving": 0.15, "graph": 0.05,
+           "topology": 0.15, "fit": 0.20}
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,9 @@ class PipelineSettings:
     ----------
     segmentation : SegmentationSettings
     cameras : CameraEstimationSettings
+    agreement : MaskAgreementSettings
+        How segmented masks are made to agree across views (``rounds=0``: not at all;
+        masks given with ``masks`` are used as they are).
     carving : CarvingSettings
     graph : SegmentGraphSettings
     topology : TopologySettings
@@ -67,6 +73,7 @@ class PipelineSettings:
 
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
     cameras: CameraEstimationSettings = field(default_factory=CameraEstimationSettings)
+    agreement: MaskAgreementSettings = field(default_factory=MaskAgreementSettings)
     carving: CarvingSettings = field(default_factory=CarvingSettings)
     graph: SegmentGraphSettings = field(default_factory=SegmentGraphSettings)
     topology: TopologySettings = field(default_factory=TopologySettings)
@@ -223,12 +230,15 @@ class _Clock:
 
 
 def _segment(sequence, colour, settings, stage, cancel):
-    if colour is None:
-        colour = auto_colour(sequence.read(min(settings.reference_frame, len(sequence) - 1)))
+    reference = min(settings.reference_frame, len(sequence) - 1)
+    frames = reference_frames(len(sequence), reference, settings.segmentation.model_frames)
+    colour, model = sequence_colour([sequence.read(k) for k in frames], colour,
+                                    settings.segmentation)
     masks, junctions = [], []
     for number in range(len(sequence)):
         check_cancel(cancel, "the reconstruction")
-        segmentation = segment_frame(sequence.read(number), colour, settings.segmentation)
+        segmentation = segment_frame(sequence.read(number), colour, settings.segmentation,
+                                     model=model)
         masks.append(segmentation.mask)
         junctions.append(segmentation.junctions)
         stage((number + 1) / len(sequence), "masks")
@@ -264,6 +274,40 @@ def _cameras(sequence, cameras, settings, stage, cancel):
     _, _, transform, _ = make_upright(known, points, settings=settings.upright)
     stage(1.0, "cameras")
     return known, transform.R[2], warnings
+
+
+def sequence_cameras(sequence, cameras=None, *, settings=PipelineSettings(), progress=None,
+                     cancel=None):
+    """The cameras of an open image sequence's frames, as a reconstruction gets them.
+
+    Parameters
+    ----------
+    sequence : ImageSequence
+    cameras : str, os.PathLike or sequence of Camera, optional
+        A COLMAP model folder (or cameras) named after the frames; estimated with pycolmap
+        (``settings.cameras``) if None.
+    settings : PipelineSettings, optional
+    progress : callable, optional
+    cancel : threading.Event, optional
+
+    Returns
+    -------
+    cameras : list of Camera
+        One per frame that has one (registered, or named in the model).
+    up : ndarray, shape (3,)
+        The world's up direction.
+    warnings : list of str
+        Frames left out.
+
+    Raises
+    ------
+    InputError
+        No camera of the model is named after a frame.
+    ReconstructionError
+        Too few frames registered.
+    Cancelled
+    """
+    return _cameras(sequence, cameras, settings, StageProgress(progress), cancel)
 
 
 def _fit_paths(topology, evidence, voxels, radius, up, settings, stage, cancel):
@@ -461,7 +505,9 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
             raise InputError(f"the {name} must be a positive number")
     if colour is not None and not isinstance(colour, ColourRange):
         colour = ColourRange.parse(str(colour))
-    stages = ["masks", "cameras", "carving", "graph", "topology", "fit"]
+    agree = masks is None and settings.agreement.rounds > 0
+    stages = ["masks", "cameras"] + (["agreement"] if agree else []) + [
+        "carving", "graph", "topology", "fit"]
     clock = _Clock(progress, cancel, stages)
     with open_image_sequence(images) as sequence:
         stage = clock.stage("masks")
@@ -487,6 +533,16 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
             warnings.append(f"no cable pixels in {len(empty)} frame(s): {', '.join(empty)}")
         by_name = dict(zip(sequence.names, zip(sequence.paths, frame_masks, frame_junctions)))
         views = [View(camera, *by_name[camera.name]) for camera in frame_cameras]
+        if agree:
+            stage = clock.stage("agreement")
+            views, alone = _agree(views, settings, stage, cancel)
+            clock.done()
+            if alone:
+                warnings.append(f"the masks of {len(alone)} frame(s) disagree with the other "
+                                f"views and were used as they are: {', '.join(alone)}")
+            agreed = {view.camera.name: view.mask for view in views}
+            frame_masks = [agreed.get(name, mask)
+                           for name, mask in zip(sequence.names, frame_masks)]
         grid, topology, warnings = _carve_and_resolve(views, up, clock, settings, cancel,
                                                       warnings)
         reference = min(settings.reference_frame, len(sequence) - 1)
@@ -503,6 +559,20 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         warnings=tuple(warnings), diameter=diameter, length=length,
         estimated=cameras is None, colour=colour_seen)
     return state._fitted(clock, stage, cancel)
+
+
+def _agree(views, settings, stage, cancel):
+    """The views with their masks agreed across views (:func:`agree_masks`), and the names
+    of the frames whose masks were left as they were."""
+    masks, report = agree_masks([view.camera for view in views], [view.mask for view in views],
+                                junctions=[view.junctions for view in views],
+                                carving=settings.carving, settings=settings.agreement,
+                                segmentation=settings.segmentation, progress=stage,
+                                cancel=cancel)
+    log.info(report.summary())
+    views = [replace(view, mask=mask, junctions=junctions)
+             for view, mask, junctions in zip(views, masks, report.junctions)]
+    return views, list(report.left_alone)
 
 
 def _carve_and_resolve(views, up, clock, settings, cancel, warnings):

@@ -17,9 +17,12 @@ from .errors import ReconstructionError
 from .ground_truth import read_ground_truth
 from .synthetic_scene import SceneSpec, make_scene, write_scene
 
-__all__ = ["bench_pipeline", "pipeline_suite"]
+__all__ = ["bench_pipeline", "pipeline_suite", "bench_pipeline_looks"]
 
-_STAGE_COLUMNS = ("masks", "cameras", "carving", "graph", "topology", "fit")
+_STAGE_COLUMNS = ("masks", "cameras", "agreement", "carving", "graph", "topology", "fit")
+
+#: Address space a bench run may use (bytes).
+MEMORY_LIMIT = 8 * 1024 ** 3
 
 
 def pipeline_suite(views=30):
@@ -39,18 +42,26 @@ def pipeline_suite(views=30):
     ]
 
 
-def _run(folder, truth_file, use_true_cameras):
-    """In a fresh process: reconstruct one capture and score it."""
+def _run(folder, truth_file, use_true_cameras, masks=None):
+    """In a fresh process: reconstruct one capture (with ``masks`` if given) and score it.
+
+    The process may use at most :data:`MEMORY_LIMIT` bytes: a run past it is a row with its
+    error, not a machine out of memory.
+    """
+    import resource
+
     from .metrics import evaluate
     from .pipeline import reconstruct
 
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
     truth = read_ground_truth(truth_file)
     folder = Path(folder)
     started = time.perf_counter()
     try:
         result = reconstruct(folder / "images",
-                             cameras=folder / "sparse" if use_true_cameras else None)
-    except ReconstructionError as error:
+                             cameras=folder / "sparse" if use_true_cameras else None,
+                             masks=masks)
+    except (ReconstructionError, ValueError, MemoryError) as error:
         return {"error": str(error)[:80], "total_s": time.perf_counter() - started}
     total = time.perf_counter() - started
     metrics = evaluate(result, truth, align=not use_true_cameras)
@@ -114,3 +125,78 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, progress=
     if progress is not None:
         progress(1.0, "done")
     return rows
+
+
+_LOOK_COLUMNS = ("looks", "set", "scene", "masks", "accuracy_mean", "accuracy_p95",
+                 "completeness", "crossings", "one_path", "radius_error", "masks_s",
+                 "agreement_s", "total_s", "error")
+
+
+def _write_naive_masks(images, out):
+    """The naive threshold's masks (:func:`.look_benchmark.naive_mask`) of a folder of
+    frames, written into ``out``."""
+    import cv2
+
+    from .image_sequence import read_image
+    from .look_benchmark import naive_mask
+
+    out.mkdir(parents=True)
+    for path in sorted(Path(images).iterdir()):
+        mask = naive_mask(read_image(path))
+        cv2.imwrite(str(out / (path.stem + ".png")), mask.astype("uint8") * 255)
+    return out
+
+
+def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks",
+                         progress=None):
+    """End to end on every look family (tuning and held-out seeds) and the Cycles captures,
+    with the true cameras: our masks (as a user's run makes them), the naive threshold's,
+    and the exact masks (the oracle).
+
+    Parameters
+    ----------
+    seeds : int, optional
+        Scenes per family and seed set.
+    views : int, optional
+        Views per synthetic scene (960x720, 3 crossings).
+    captures : path, optional
+        Pre-rendered Cycles captures (held out).
+    progress : callable, optional
+
+    Returns
+    -------
+    list of dict
+    """
+    from .synthetic_looks import HELD_OUT_SEEDS, LOOK_FAMILIES, TUNING_SEEDS
+    from .synthetic_scene import look_scene
+
+    jobs = [(family, split, seed) for family in LOOK_FAMILIES
+            for split, pool in (("tuning", TUNING_SEEDS), ("held-out", HELD_OUT_SEEDS))
+            for seed in pool[:seeds]]
+    captures = Path(captures)
+    if captures.is_dir():
+        jobs += [("Cycles " + folder.name.split("-")[0], "held-out", folder)
+                 for folder in sorted(captures.iterdir())
+                 if (folder / "ground_truth.json").is_file()]
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="bench_looks_") as work:
+        for number, (family, split, seed) in enumerate(jobs):
+            if progress is not None:
+                progress(number / len(jobs), f"{family} {split}")
+            if isinstance(seed, Path):
+                folder, label = seed, seed.name
+            else:
+                folder, label = Path(work) / f"{family}-{seed}", f"seed {seed}"
+                write_scene(look_scene(family, seed, views=views, width=960, height=720),
+                            folder)
+            naive = _write_naive_masks(folder / "images", Path(work) / f"naive-{number}")
+            for masks_label, masks in (("ours", None), ("naive threshold", naive),
+                                       ("oracle: exact", folder / "masks")):
+                row = {"looks": family, "set": split, "scene": label, "masks": masks_label}
+                row.update(in_fresh_process(_run, str(folder),
+                                            str(folder / "ground_truth.json"), True,
+                                            None if masks is None else str(masks)))
+                rows.append(row)
+    if progress is not None:
+        progress(1.0, "done")
+    return [{column: row.get(column, "") for column in _LOOK_COLUMNS} for row in rows]

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .errors import InputError
+from .colour_model import ColourModel, find_cable, find_cable_colour, thickest, thin_pieces
+from .colour_range import ColourRange, hsv_image
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 
 #: :func:`refine_edges` takes the cable's and the background's colours from every this many
@@ -28,63 +29,9 @@ from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 _EDGE_SAMPLE = 7
 
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "auto_colour",
+           "reference_frames", "sequence_colour", "learn_colour_model", "colour_seed",
            "colour_at", "segment_frame", "cable_mask", "refine_edges", "cable_width", "junction_map",
            "junction_centres"]
-
-
-@dataclass(frozen=True)
-class ColourRange:
-    """A cable colour: an HSV box, or a brightness class for a colourless cable.
-
-    Attributes
-    ----------
-    low, high : tuple of int
-        ``(H, S, V)`` bounds, inclusive; the hue wraps when ``low[0] > high[0]``.
-    """
-
-    low: tuple = (0, 0, 0)
-    high: tuple = (179, 255, 255)
-
-    def __post_init__(self):
-        low, high = tuple(int(v) for v in self.low), tuple(int(v) for v in self.high)
-        if len(low) != 3 or len(high) != 3:
-            raise ValueError("an HSV range needs three low and three high values")
-        for name, value, top in zip("HSV", zip(low, high), (179, 255, 255)):
-            if not (0 <= value[0] <= top and 0 <= value[1] <= top):
-                raise ValueError(f"{name} must lie in 0..{top}")
-        if low[1] > high[1] or low[2] > high[2]:
-            raise ValueError("saturation and value ranges must have low <= high")
-        object.__setattr__(self, "low", low)
-        object.__setattr__(self, "high", high)
-
-    @classmethod
-    def parse(cls, text):
-        """From ``"H1,S1,V1,H2,S2,V2"`` (the ``--hsv`` option); :class:`InputError` if bad."""
-        try:
-            values = [int(v) for v in text.split(",")]
-            if len(values) != 6:
-                raise ValueError("six numbers expected")
-            return cls(tuple(values[:3]), tuple(values[3:]))
-        except ValueError as error:
-            raise InputError(f"--hsv {text!r}: {error} (H1,S1,V1,H2,S2,V2 with H 0-179, "
-                             "S and V 0-255)") from None
-
-    def __str__(self):
-        return ",".join(str(v) for v in (*self.low, *self.high))
-
-    @property
-    def has_hue(self):
-        """False for a brightness range (any hue): a cable with no colour of its own."""
-        return not (self.low[0] == 0 and self.high[0] == 179)
-
-    def select(self, hsv):
-        """Boolean mask of the pixels of an HSV image inside the range."""
-        (h1, s1, v1), (h2, s2, v2) = self.low, self.high
-        if h1 <= h2:
-            return cv2.inRange(hsv, self.low, self.high) > 0
-        # the hue wraps: two boxes
-        return (cv2.inRange(hsv, (h1, s1, v1), (179, s2, v2))
-                | cv2.inRange(hsv, (0, s1, v1), (h2, s2, v2))) > 0
 
 
 @dataclass(frozen=True)
@@ -121,6 +68,29 @@ class SegmentationSettings:
     edge_contrast : float
         An edge pixel is re-decided only where the local cable and background colours differ
         by at least this much (RGB distance, 8-bit levels).
+    model : bool
+        Classify pixels by a colour model of the cable against the background learnt from the
+        colour range's thin pieces (:class:`ColourModel`), not by the range itself.
+    model_frames : int
+        The reconstruction learns the model from this many frames spread over the sequence.
+    model_smoothing : float
+        Smoothing of the model's colour histograms, in bins of 8 levels: colours near the
+        cable's (its shading the range missed) count as cable.
+    adapt_rounds : int
+        Each frame mixes the sequence's model with its own colours (seeded by its mask) this
+        many times: exposure and white balance drift along a sequence.
+    probability : float
+        A pixel is cable when the model gives its colour at least this probability.
+    probability_near : float
+        Within half a cable width of such pixels, this probability is enough, or being in the
+        colour range.
+    range_share : float
+        The colour range counts there only when it holds at most this many times the sure
+        pixels.
+    blob_elongation, blob_thickness : float
+        Pieces of the mask less elongated than ``blob_elongation`` (length over width,
+        :func:`thin_pieces`) that hold a disc of radius ``blob_thickness`` cable widths (no
+        crossing does) are objects of the cable's colour, not cable.
     """
 
     speck_area: float = 3.0
@@ -134,6 +104,15 @@ class SegmentationSettings:
     junction_hole: float = 0.5
     edge_reach: int = 2
     edge_contrast: float = 20.0
+    model: bool = True
+    model_frames: int = 3
+    model_smoothing: float = 1.0
+    adapt_rounds: int = 1
+    probability: float = 0.5
+    probability_near: float = 0.1
+    range_share: float = 3.0
+    blob_elongation: float = 10.0
+    blob_thickness: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,8 +124,7 @@ class FrameSegmentation:
     width: float
 
 
-def _hsv(image_rgb):
-    return cv2.cvtColor(np.ascontiguousarray(image_rgb), cv2.COLOR_RGB2HSV)
+_hsv = hsv_image
 
 
 def _hue_peak(hues, weights=None):
@@ -157,45 +135,47 @@ def _hue_peak(hues, weights=None):
     return int(np.argmax(smooth))
 
 
-def _hue_distance(hues, centre):
-    d = np.abs(hues.astype(int) - centre)
-    return np.minimum(d, 180 - d)
-
-
-def _otsu(values):
-    values = np.asarray(values, dtype=np.uint8).reshape(-1, 1)
-    threshold, _ = cv2.threshold(values, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
-    return int(threshold)
-
-
 def auto_colour(image_rgb):
-    """The cable colour of a frame: its dominant strongly saturated colour.
-
-    The most saturated few percent of the pixels vote for a hue; the pixels of about that hue
-    are split by saturation (Otsu) into the cable and whatever else shares its hue. A frame
-    with no strongly coloured object gives a brightness range instead: the minority side of
-    an Otsu split of the value channel (a dark cable on a light table, or the reverse).
+    """The cable colour of one frame, found automatically (:func:`find_cable_colour`).
 
     Returns
     -------
     ColourRange
     """
-    hsv = _hsv(image_rgb)
-    h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
-    lit = v > 40
-    top = s >= max(np.percentile(s[lit], 97.0), 1) if lit.any() else s > 0
-    if s[top].size == 0 or np.median(s[top]) < 90:  # nothing strongly coloured
-        threshold = _otsu(v)
-        dark = (v <= threshold).mean() < 0.5
-        return ColourRange((0, 0, 0), (179, 255, threshold)) if dark else \
-            ColourRange((0, 0, threshold + 1), (179, 255, 255))
-    peak = _hue_peak(h[top], s[top].astype(float))
-    spread = np.percentile(_hue_distance(h[top], peak), 95)
-    band = int(np.clip(spread + 4, 6, 25))
-    same_hue = (_hue_distance(h, peak) <= band) & lit
-    saturation = max(_otsu(s[same_hue]), 40)
-    low_v = max(int(np.percentile(v[same_hue & (s > saturation)], 0.5)) // 2, 20)
-    return ColourRange(((peak - band) % 180, saturation, low_v), ((peak + band) % 180, 255, 255))
+    return find_cable_colour([image_rgb])
+
+
+def reference_frames(count, reference, number):
+    """``number`` frame indices spread over a sequence of ``count``, ``reference`` first."""
+    spread = np.linspace(0, count - 1, max(number, 1) + 1).astype(int)
+    others = [int(k) for k in spread if k != reference]
+    return [reference] + list(dict.fromkeys(others))[:max(number - 1, 0)]
+
+
+def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
+    """The cable's colour and colour model of a sequence, from a few of its frames.
+
+    Parameters
+    ----------
+    frames : sequence of ndarray
+        A few frames spread over the sequence (:func:`reference_frames`), RGB uint8; the
+        automatic colour's candidates come from the first.
+    colour : ColourRange, optional
+        Set by hand or picked; found automatically if None.
+    settings : SegmentationSettings, optional
+
+    Returns
+    -------
+    colour : ColourRange
+    model : ColourModel or None
+        None when ``settings.model`` is off or the range has no thin piece in the frames.
+    """
+    frames = list(frames)
+    seed_colour = colour
+    if colour is None:
+        colour, seed_colour = find_cable(frames)
+    model = learn_colour_model(frames, seed_colour, settings) if settings.model else None
+    return colour, model
 
 
 def colour_at(image_rgb, x, y, *, radius=3):
@@ -277,7 +257,97 @@ def _cable_box(mask, margin):
                  max(cols[0] - margin, 0):cols[-1] + margin + 1]
 
 
-def cable_mask(image_rgb, colour, settings=SegmentationSettings()):
+def _opened(mask):
+    """A 3x3 cross opening (a symmetric kernel: an even one would shift the mask a pixel)."""
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, cross) > 0
+
+
+def colour_seed(image_rgb, colour):
+    """The cable's sure pixels in a frame: the thin pieces of a colour range's (or a found
+    candidate's) pixels; the pieces shaped like objects; the cable's width.
+
+    Parameters
+    ----------
+    image_rgb : ndarray
+    colour : ColourRange or CableCandidate
+
+    Returns
+    -------
+    seed, objects : ndarray of bool
+    width : float
+    """
+    labels, thin, half_width, area = thin_pieces(_opened(colour.select_rgb(image_rgb)))
+    seed = thin[labels]
+    width = cable_width(seed)
+    objects = ~thin & (half_width > 0.5 * width) & (area > 4 * width * width)
+    objects[0] = False
+    return seed, objects[labels], width
+
+
+def learn_colour_model(images_rgb, colour, settings=SegmentationSettings()):
+    """A colour model of the cable learnt from frames and a colour (:func:`colour_seed`).
+
+    Parameters
+    ----------
+    images_rgb : sequence of ndarray
+    colour : ColourRange or CableCandidate
+    settings : SegmentationSettings, optional
+
+    Returns
+    -------
+    ColourModel or None
+        None when the colour has no thin piece in any of the frames (the range is then used
+        as it is).
+    """
+    images_rgb = list(images_rgb)
+    seeds = [colour_seed(image, colour) for image in images_rgb]
+    if not any(seed.any() for seed, _, _ in seeds):
+        return None
+    try:
+        return ColourModel.learn(images_rgb, [seed for seed, _, _ in seeds],
+                                 widths=[width for _, _, width in seeds],
+                                 others=[objects for _, objects, _ in seeds],
+                                 smoothing=settings.model_smoothing)
+    except ValueError:
+        return None
+
+
+def _model_mask(image_rgb, model, settings, in_range=None):
+    """Pixels the model calls cable: ``(sure, sure or likely)``. Sure at ``probability``;
+    likely within half a cable width of a sure one, at ``probability_near`` or inside the
+    colour range (a cable's shade side, or a strand darkened where another passes over it,
+    is a colour the background has too, but not right beside the cable). The range counts
+    only when it holds at most ``range_share`` times the sure pixels (a range around a
+    striped cable holds the whole frame)."""
+    probability = cv2.GaussianBlur(model.probability(image_rgb), (3, 3), 0)
+    sure = probability >= 255.0 * settings.probability
+    if not settings.probability_near < settings.probability:
+        return sure, sure
+    small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
+                       interpolation=cv2.INTER_AREA) > 0
+    reach = max(int(round(cable_width(_opened(small)))), 1)  # half a width, full size
+    near = cv2.dilate(sure.view(np.uint8), cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
+    likely = probability >= 255.0 * settings.probability_near
+    if in_range is not None and in_range.sum() <= settings.range_share * sure.sum():
+        likely |= in_range
+    return sure, sure | (near & likely)
+
+
+def _drop_blobs(mask, width, settings):
+    """``mask`` without pieces shaped like objects rather than cable: holding a disc wider
+    than ``2 * blob_thickness`` cable widths and shorter than ``blob_elongation`` widths."""
+    labels, thin, _, area = thin_pieces(mask, min_elongation=settings.blob_elongation,
+                                        min_area=0)
+    blob = ~thin & (thickest(mask, labels, len(area)) > settings.blob_thickness * width)
+    blob[0] = False
+    if not blob.any():
+        return mask
+    return mask & ~blob[labels]
+
+
+def cable_mask(image_rgb, colour, settings=SegmentationSettings(), *, model=None):
     """The cable pixels of one frame.
 
     Parameters
@@ -292,20 +362,33 @@ def cable_mask(image_rgb, colour, settings=SegmentationSettings()):
     width : float
         The cable's width in pixels (0 if there is no cable).
     """
-    mask, _, width = _cable_masks(image_rgb, colour, settings)
+    mask, _, width = _cable_masks(image_rgb, colour, settings, model)
     return mask, width
 
 
-def _cable_masks(image_rgb, colour, settings):
+def _cable_masks(image_rgb, colour, settings, model=None):
     """``(mask, colour-range mask, width)``: the cable mask with its outline refined
     (:func:`refine_edges`) and the mask before that, whose topology the junctions are read
     from (on the realistic sample, junctions from the refined outline put 12% of their pixels
     farther than 3 r from any crossing; from the colour range's mask, 3.5%)."""
     hsv = _hsv(image_rgb)
-    raw = colour.select(hsv)
-    # A symmetric kernel: an even one would shift the whole mask by a pixel.
-    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-    raw = cv2.morphologyEx(raw.astype(np.uint8), cv2.MORPH_OPEN, cross)
+    rounds = settings.adapt_rounds
+    if settings.model and model is None:  # learnt from this frame: nothing to adapt
+        model, rounds = learn_colour_model([image_rgb], colour, settings), 0
+    if settings.model and model is not None:
+        in_range = colour.select(hsv)
+        sure, raw = _model_mask(image_rgb, model, settings, in_range)
+        for _ in range(rounds):  # the frame's own colours, seeded by its sure pixels
+            labels, thin, _, _ = thin_pieces(_opened(sure))
+            seed = thin[labels]
+            if not seed.any():
+                break
+            sure, raw = _model_mask(image_rgb, model.adapted(image_rgb, seed,
+                                                             cable_width(seed)), settings,
+                                    in_range)
+    else:
+        raw = colour.select(hsv)
+    raw = _opened(raw).view(np.uint8)
     # a rough width at half size (enough to size the clean-up) costs a quarter of a full one
     half = cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2),
                       interpolation=cv2.INTER_AREA) > 0
@@ -314,6 +397,8 @@ def _cable_masks(image_rgb, colour, settings):
     if width == 0:
         return raw, raw, 0.0
     mask = _remove_specks(raw, half, settings.speck_area * width * width)
+    if settings.blob_elongation > 0:
+        mask = _drop_blobs(mask, width, settings)
     # the rest only looks at the cable and its surroundings: its box with room for a closing
     box = _cable_box(mask, int(width) + 2)
     if box is None:
@@ -586,8 +671,23 @@ def _confirmed(mask, width, centre, settings):
     return bool((count[near] > settings.junction_ratio * 2.0 * radius * width).any())
 
 
-def segment_frame(image_rgb, colour, settings=SegmentationSettings()):
-    """Mask, junctions and width of one frame (junctions from the colour range's mask)."""
-    mask, colour_range_mask, width = _cable_masks(image_rgb, colour, settings)
+def segment_frame(image_rgb, colour, settings=SegmentationSettings(), *, model=None):
+    """Mask, junctions and width of one frame (junctions from the mask before its outline
+    is refined).
+
+    Parameters
+    ----------
+    image_rgb : ndarray, shape (H, W, 3), uint8
+    colour : ColourRange
+    settings : SegmentationSettings, optional
+    model : ColourModel, optional
+        The sequence's colour model (:func:`learn_colour_model`); learnt from this frame
+        alone if None and ``settings.model``.
+
+    Returns
+    -------
+    FrameSegmentation
+    """
+    mask, colour_range_mask, width = _cable_masks(image_rgb, colour, settings, model)
     junctions = junction_map(colour_range_mask, width, settings) & mask
     return FrameSegmentation(mask=mask, junctions=junctions, width=width)

@@ -26,28 +26,37 @@ def field_help(cls):
     return texts
 
 
-def add_settings_arguments(parser, cls, *, skip=()):
-    """Add ``--field-name`` for every int/float/bool field of the dataclass ``cls``."""
+def add_settings_arguments(parser, cls, *, skip=(), prefix=""):
+    """Add ``--field-name`` for every int/float/bool field of the dataclass ``cls``.
+
+    With a ``prefix`` (e.g. ``"agreement"``) the flags are ``--agreement-field-name`` and
+    their destinations ``agreement_field_name``: for settings whose field names would be
+    unclear, or clash with another class's, among a command's flags.
+    """
     group = parser.add_argument_group(cls.__name__)
     texts = field_help(cls)
     for field in dataclasses.fields(cls):
         if field.name in skip or field.type not in (int, float, bool, "int", "float", "bool"):
             continue
-        flag = "--" + field.name.replace("_", "-")
+        name = f"{prefix}_{field.name}" if prefix else field.name
+        flag = "--" + name.replace("_", "-")
         kind = {"int": int, "float": float, "bool": bool}.get(field.type, field.type)
         if kind is bool:  # a flag that changes the default
-            flag = flag if not field.default else "--no-" + field.name.replace("_", "-")
-            group.add_argument(flag, dest=field.name, default=field.default,
+            flag = flag if not field.default else "--no-" + name.replace("_", "-")
+            group.add_argument(flag, dest=name, default=field.default,
                                action="store_false" if field.default else "store_true",
                                help=("turn off: " if field.default else "")
                                + texts.get(field.name, ""))
             continue
-        group.add_argument(flag, dest=field.name, type=kind, default=field.default,
+        group.add_argument(flag, dest=name, type=kind, default=field.default,
                            metavar=field.name.upper(),
                            help=f"{texts.get(field.name, '')} (default {field.default})")
 
 
-def settings_from_arguments(cls, args):
-    """Build ``cls`` from parsed arguments named after its fields."""
-    names = {f.name for f in dataclasses.fields(cls)}
-    return cls(**{name: value for name, value in vars(args).items() if name in names})
+def settings_from_arguments(cls, args, *, prefix=""):
+    """Build ``cls`` from parsed arguments named after its fields (with ``prefix``, as
+    :func:`add_settings_arguments` named them)."""
+    values = vars(args)
+    names = [f.name for f in dataclasses.fields(cls)]
+    keys = {name: f"{prefix}_{name}" if prefix else name for name in names}
+    return cls(**{name: values[key] for name, key in keys.items() if key in values})

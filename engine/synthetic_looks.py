@@ -137,7 +137,7 @@ class Look:
     lift: float = 0.0
     clutter: tuple = ()
     noise: float = 2.0
-    jpeg_quality: int = 92
+    jpeg_quality: int = 100
     blur: float = 0.6
     exposure: float = 1.0
     vignetting: float = 0.0
@@ -158,7 +158,8 @@ class Look:
                          math.sin(azimuth) * math.cos(elevation), math.sin(elevation)])
 
 
-#: The look of the original bench: a red glossy cable on light oak, soft light.
+#: The look of the original bench: a red glossy cable on light oak, soft light, frames kept
+#: uncompressed (the fast renderer draws it as it always did).
 DEFAULT_LOOK = Look()
 
 

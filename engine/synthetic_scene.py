@@ -2,12 +2,18 @@
 
 A written scene is a folder a user's capture would look like, plus what is really there::
 
-    images/000.png ...      colour views
+    images/000.png ...      colour views (000.jpg ... when the look compresses them)
     masks/000.png ...       exact cable masks (cable = 255), same stems
     sparse/                 COLMAP text model of the true cameras
     ground_truth.json       cable_recon.ground_truth/1
+    look.json               the look's fields (engine.synthetic_looks.Look)
+
+A scene is drawn in a *look* (:mod:`.synthetic_looks`): :func:`look_scene` builds "family X,
+seed N" in one call.
 """
 
+import dataclasses
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -15,12 +21,14 @@ import cv2
 import numpy as np
 
 from .colmap_model import write_colmap_model
-from .ground_truth import write_ground_truth
+from .ground_truth import GroundTruth, write_ground_truth
 from .synthetic_cameras import cable_pixel_width, handheld_cameras, orbit_cameras
 from .synthetic_layouts import hanging_layout, knot_layout, table_layout
-from .synthetic_render import RenderSettings, render_views
+from .synthetic_looks import DEFAULT_LOOK, ClutterObject, Look, sample_look
+from .synthetic_render import render_views
 
-__all__ = ["SceneSpec", "SyntheticScene", "make_scene", "write_scene", "MIN_CABLE_PIXELS"]
+__all__ = ["SceneSpec", "SyntheticScene", "make_scene", "write_scene", "look_spec", "look_scene",
+           "lift_truth", "read_look", "MIN_CABLE_PIXELS"]
 
 #: Nothing can be reconstructed from a thinner wire; scenes are always at least this wide.
 MIN_CABLE_PIXELS = 5.0
@@ -46,8 +54,11 @@ class SceneSpec:
         ``"orbit"`` or ``"handheld"``.
     width, height : int
         Image size.
-    image_format : str
-        ``"png"`` or ``"jpg"``.
+    image_format : str or None
+        ``"png"`` or ``"jpg"``; None: ``"jpg"`` when the look compresses its frames
+        (``look.jpeg_quality < 100``), else ``"png"``.
+    look : Look
+        What the scene looks like (:mod:`.synthetic_looks`); its ``lift`` raises the layout.
     """
 
     kind: str = "table"
@@ -59,7 +70,21 @@ class SceneSpec:
     rig: str = "orbit"
     width: int = 960
     height: int = 720
-    image_format: str = "png"
+    image_format: str = None
+    look: Look = DEFAULT_LOOK
+
+    def __post_init__(self):
+        if self.image_format not in (None, "png", "jpg"):
+            raise ValueError("image_format must be 'png', 'jpg' or None")
+        if not isinstance(self.look, Look):
+            raise ValueError("look must be a Look (see engine.synthetic_looks)")
+
+    @property
+    def file_format(self):
+        """The image files' format: ``image_format``, or the look's choice if that is None."""
+        if self.image_format is not None:
+            return self.image_format
+        return "jpg" if self.look.jpeg_quality < 100 else "png"
 
     def layout(self):
         """The scene's ground truth, without cameras."""
@@ -77,12 +102,17 @@ class SceneSpec:
 
 @dataclass(frozen=True, eq=False)
 class SyntheticScene:
-    """A generated scene: ground truth (with its cameras) and the rendered views."""
+    """A generated scene: ground truth (with its cameras) and the rendered views.
+
+    ``encoded`` holds each view's JPEG file when the look compresses its frames (``images``
+    are those files decoded), so a written scene holds exactly the images kept in memory.
+    """
 
     spec: SceneSpec
     truth: object
     images: tuple
     masks: tuple
+    encoded: tuple = ()
 
     @property
     def cameras(self):
@@ -90,8 +120,26 @@ class SyntheticScene:
         return self.truth.cameras
 
 
-def make_scene(spec, render=RenderSettings()):
-    """Generate and render a scene with the fast renderer.
+def lift_truth(truth, lift):
+    """The truth raised ``lift`` radii above the table (crossings and cameras kept)."""
+    if not lift:
+        return truth
+    centreline = truth.centreline + np.array([0.0, 0.0, lift * truth.radius])
+    return GroundTruth(centreline, truth.radius, truth.crossings, truth.closed, truth.cameras,
+                       truth.kind, truth.up)
+
+
+def make_scene(spec, *, texture=None):
+    """Generate and render a scene in its look with the fast renderer.
+
+    The layout is raised by ``spec.look.lift`` radii (the ground truth with it), then framed
+    by the cameras.
+
+    Parameters
+    ----------
+    spec : SceneSpec
+    texture : ndarray, optional
+        Table texture to use instead of the look's (RGB uint8, square).
 
     Raises
     ------
@@ -100,26 +148,69 @@ def make_scene(spec, render=RenderSettings()):
     """
     if not 10 <= spec.views <= 60:
         raise ValueError("views must be between 10 and 60")
-    truth = spec.layout()
+    truth = lift_truth(spec.layout(), spec.look.lift)
     rig = {"orbit": orbit_cameras, "handheld": handheld_cameras}[spec.rig]
     low_views = (30.0, 60.0) if spec.kind == "hanging" else (45.0, 75.0)
     cameras = rig(truth, views=spec.views, width=spec.width, height=spec.height,
-                  elevations=low_views, name_format="{:03d}." + spec.image_format,
+                  elevations=low_views, name_format="{:03d}." + spec.file_format,
                   seed=spec.seed)
     width = cable_pixel_width(truth, cameras)
     if width < MIN_CABLE_PIXELS:
         raise ValueError(f"the cable would be only {width:.1f} pixels wide: use a larger "
                          "radius, a smaller extent or larger images")
     truth = truth.with_cameras(cameras)
-    images, masks = [], []
-    for image, mask in render_views(truth, cameras, render):
+    images, masks, encoded = [], [], []
+    for image, mask, data in render_views(truth, cameras, spec.look, texture=texture,
+                                          encoded=True):
         images.append(image)
         masks.append(mask)
-    return SyntheticScene(spec=spec, truth=truth, images=tuple(images), masks=tuple(masks))
+        encoded.append(data)
+    return SyntheticScene(spec=spec, truth=truth, images=tuple(images), masks=tuple(masks),
+                          encoded=tuple(encoded) if spec.look.jpeg_quality < 100 else ())
+
+
+def look_spec(family, seed, *, kind="table", crossings=3, views=24, width=640, height=480,
+              **fields):
+    """The scene "look ``family``, seed ``seed``": its look and its layout drawn from the seed.
+
+    Parameters
+    ----------
+    family : str
+        One of :data:`.synthetic_looks.LOOK_FAMILIES`, or ``"default"`` (the original look).
+    seed : int
+        Seeds the look (:func:`.synthetic_looks.sample_look`) and the layout.
+    kind, crossings, views, width, height
+        As :class:`SceneSpec`.
+    **fields
+        Further :class:`SceneSpec` fields (``radius``, ``rig``, ``image_format``, ...).
+
+    Returns
+    -------
+    SceneSpec
+    """
+    look = DEFAULT_LOOK if family == "default" else sample_look(family, seed)
+    return SceneSpec(kind=kind, crossings=crossings, seed=seed, views=views, width=width,
+                     height=height, look=look, **fields)
+
+
+def look_scene(family, seed, *, kind="table", crossings=3, views=24, width=640, height=480,
+               **fields):
+    """Build and render the scene of :func:`look_spec` in one call.
+
+    Returns
+    -------
+    SyntheticScene
+    """
+    return make_scene(look_spec(family, seed, kind=kind, crossings=crossings, views=views,
+                                width=width, height=height, **fields))
 
 
 def write_scene(scene, folder, *, overwrite=False, jpeg_quality=92):
-    """Write a scene as images, masks, a COLMAP model of the true cameras and ground truth.
+    """Write a scene as images, masks, a COLMAP model of the true cameras, ground truth and
+    its look.
+
+    A look that compresses its frames has them written as the very JPEG files they were
+    decoded from, so the images on disk are the images in memory.
 
     Parameters
     ----------
@@ -129,6 +220,7 @@ def write_scene(scene, folder, *, overwrite=False, jpeg_quality=92):
     overwrite : bool, optional
         Replace a scene already written there.
     jpeg_quality : int, optional
+        For JPEG files of a look that does not compress its frames.
 
     Returns
     -------
@@ -140,12 +232,48 @@ def write_scene(scene, folder, *, overwrite=False, jpeg_quality=92):
         raise FileExistsError(f"{folder} already holds a scene (pass overwrite to replace it)")
     (folder / "images").mkdir(parents=True, exist_ok=True)
     (folder / "masks").mkdir(exist_ok=True)
-    for camera, image, mask in zip(scene.cameras, scene.images, scene.masks):
-        bgr = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-        options = [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if camera.name.endswith(".jpg") else []
-        cv2.imwrite(str(folder / "images" / camera.name), bgr, options)
+    encoded = scene.encoded or (None,) * len(scene.images)
+    for camera, image, mask, data in zip(scene.cameras, scene.images, scene.masks, encoded):
+        path = folder / "images" / camera.name
+        if data is not None and camera.name.endswith(".jpg"):
+            path.write_bytes(data)
+        else:
+            bgr = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+            options = [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if camera.name.endswith(".jpg") \
+                else []
+            cv2.imwrite(str(path), bgr, options)
         cv2.imwrite(str(folder / "masks" / (Path(camera.name).stem + ".png")),
                     mask.astype(np.uint8) * 255)
     write_colmap_model(folder / "sparse", scene.cameras, overwrite=overwrite)
     write_ground_truth(scene.truth, truth_path, overwrite=overwrite)
+    (folder / "look.json").write_text(
+        json.dumps(dataclasses.asdict(scene.spec.look), indent=1) + "\n", encoding="utf-8")
     return folder
+
+
+def read_look(path):
+    """The look a written scene was drawn in (its ``look.json``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``look.json`` file, or the scene's folder.
+
+    Returns
+    -------
+    Look
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "look.json"
+    data = json.loads(path.read_text(encoding="utf-8"))
+    fields = {f.name for f in dataclasses.fields(Look)}
+    unknown = set(data) - fields
+    if unknown:
+        raise ValueError(f"{path}: unknown look fields {sorted(unknown)}")
+    data = {key: tuple(value) if isinstance(value, list) else value
+            for key, value in data.items()}
+    data["clutter"] = tuple(ClutterObject(**{k: tuple(v) if isinstance(v, list) else v
+                                             for k, v in thing.items()})
+                            for thing in data.get("clutter", ()))
+    return Look(**data)

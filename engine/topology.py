@@ -572,10 +572,11 @@ def _close_gaps(context, warnings):
     g = g.copy()
     taken = set()
     for node, centre, distance, end, edge, points in sorted(pairs, key=lambda p: p[2]):
-        if end in taken:
-            continue
-        taken.add(end)
         far = edge[0] if edge[1] == end else edge[1]
+        # each free end and each edge once; an edge between two free ends is bridged at one
+        if taken & {end, far, edge} or node not in g:
+            continue
+        taken.update([end, edge])
         count = max(int(math.ceil(np.linalg.norm(centre - points[-1]) / context.spacing)), 1)
         bridge = points[-1] + np.linspace(0.0, 1.0, count + 1)[1:, None] * (centre - points[-1])
         chain = np.vstack([points, bridge])[::-1]  # from the junction to the far node

@@ -51,7 +51,8 @@ def test_one_path_through_every_crossing_with_true_cameras(capture, result):
     assert metrics.accuracy_mean < 0.3 and metrics.accuracy_p95 < 0.8
     assert abs(result.radius / scene.truth.radius - 1) < 0.1
     assert result.units == "model" and len(result.cameras) == 24
-    assert set(result.timings) == {"masks", "cameras", "carving", "graph", "topology", "fit"}
+    assert set(result.timings) == {"masks", "cameras", "agreement", "carving", "graph",
+                                   "topology", "fit"}
     assert calls[-1] == pytest.approx(1.0) and all(a <= b + 1e-9 for a, b in zip(calls, calls[1:]))
 
 

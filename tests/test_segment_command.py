@@ -25,9 +25,11 @@ def run_engine(*args):
 
 def test_segment_writes_masks_junctions_and_a_contact_sheet(scene_folder, tmp_path):
     folder, scene = scene_folder
-    run = run_engine("segment", folder / "images", "-o", tmp_path / "out")
+    run = run_engine("segment", folder / "images", "-o", tmp_path / "out", "--cameras",
+                     folder / "sparse")
     assert run.returncode == 0, run.stderr
     assert "100%" in run.stderr and "--hsv" in run.stderr
+    assert "masks agreed across views" in run.stderr
     for camera, truth in zip(scene.cameras, scene.masks):
         stem = camera.name.rsplit(".", 1)[0] + ".png"
         mask = cv2.imread(str(tmp_path / "out" / "masks" / stem), cv2.IMREAD_GRAYSCALE)
@@ -39,13 +41,13 @@ def test_segment_writes_masks_junctions_and_a_contact_sheet(scene_folder, tmp_pa
     again = run_engine("segment", folder / "images", "-o", tmp_path / "out")
     assert again.returncode == 2 and "already holds masks" in again.stderr
     assert run_engine("segment", folder / "images", "-o", tmp_path / "out",
-                      "--overwrite", "-q").returncode == 0
+                      "--overwrite", "--no-agreement", "-q").returncode == 0
 
 
 def test_segment_with_a_given_colour_and_bad_colours(scene_folder, tmp_path):
     folder, _ = scene_folder
     run = run_engine("segment", folder / "images", "-o", tmp_path / "a",
-                     "--hsv", "170,100,40,10,255,255")
+                     "--hsv", "170,100,40,10,255,255", "--no-agreement")
     assert run.returncode == 0, run.stderr
     bad = run_engine("segment", folder / "images", "-o", tmp_path / "b", "--hsv", "1,2,3")
     assert bad.returncode == 2 and bad.stderr.strip().startswith("error: --hsv")
@@ -64,6 +66,49 @@ def test_a_frame_without_cable_is_named(scene_folder, tmp_path):
     run = run_engine("segment", frames, "-o", tmp_path / "out")
     assert run.returncode == 2
     assert "no cable pixels in 009.png" in run.stderr.splitlines()[-1]
+
+
+def test_masks_agree_across_views_with_given_or_estimated_cameras(scene_folder, tmp_path):
+    """A red stroke painted in one frame is cable to the segmentation; the other views do
+    not see it: the agreement removes it (shown red on the contact sheet), with the true
+    cameras or estimated ones, and --no-agreement keeps it."""
+    folder, scene = scene_folder
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    for path in sorted((folder / "images").iterdir()):
+        (frames / path.name).write_bytes(path.read_bytes())
+    image = cv2.imread(str(frames / "003.png"))
+    truth = scene.masks[3]
+    colour = tuple(int(c) for c in image[truth].mean(axis=0))
+    stroke = np.array([[20, 330], [70, 300], [120, 320], [170, 290]], np.int32)
+    assert not truth[280:340, 10:180].any()
+    cv2.polylines(image, [stroke], False, colour, thickness=5, lineType=cv2.LINE_AA)
+    cv2.imwrite(str(frames / "003.png"), image)
+
+    def read(output, stem):
+        return cv2.imread(str(output / "masks" / f"{stem}.png"), cv2.IMREAD_GRAYSCALE) > 0
+
+    def iou(a, b):
+        return (a & b).sum() / (a | b).sum()
+
+    plain = run_engine("segment", frames, "-o", tmp_path / "plain", "--no-agreement")
+    assert plain.returncode == 0, plain.stderr
+    assert read(tmp_path / "plain", "003")[280:340, 10:180].sum() > 500
+    for cameras in (("--cameras", folder / "sparse"), ()):
+        output = tmp_path / ("given" if cameras else "estimated")
+        run = run_engine("segment", frames, "-o", output, *cameras)
+        assert run.returncode == 0, run.stderr
+        assert not read(output, "003")[280:340, 10:180].any()
+        for camera, truth in zip(scene.cameras, scene.masks):
+            stem = camera.name.rsplit(".", 1)[0]
+            segmented = read(tmp_path / "plain", stem)
+            assert iou(read(output, stem), truth) >= iou(segmented, truth) - 0.005
+        sheet = cv2.imread(str(output / "contact_sheet.png"))
+        red = (sheet[..., 2] > 200) & (sheet[..., 1] < 80) & (sheet[..., 0] < 80)
+        assert red.sum() > 20
+    bad = run_engine("segment", frames, "-o", tmp_path / "bad", "--cameras", tmp_path / "none")
+    assert bad.returncode == 2
+    assert bad.stderr.strip() == f"error: --cameras {tmp_path / 'none'}: not a folder"
 
 
 def test_missing_folder_exits_2(tmp_path):

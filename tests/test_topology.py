@@ -15,7 +15,7 @@ from engine.image_sequence import read_image
 from engine.errors import Cancelled, ReconstructionError
 from engine.metrics import evaluate
 from engine.segment_graph import SegmentGraph, extract_segment_graph
-from engine.segmentation import auto_colour, segment_frame
+from engine.segmentation import reference_frames, segment_frame, sequence_colour
 from engine.settings_cli import field_help
 from engine.synthetic_scene import SceneSpec, make_scene
 from engine.topology import (Topology, TopologySettings, TopologyView, resolve_topology)
@@ -343,8 +343,9 @@ def scenes():
     def build(name):
         if name not in cache:
             scene = make_scene(SCENES[name])
-            colour = auto_colour(scene.images[0])
-            segs = [segment_frame(image, colour) for image in scene.images]
+            frames = [scene.images[k] for k in reference_frames(len(scene.images), 0, 3)]
+            colour, model = sequence_colour(frames)  # as the pipeline segments
+            segs = [segment_frame(image, colour, model=model) for image in scene.images]
             grid = carve(scene.cameras, [s.mask for s in segs], [s.junctions for s in segs])
             core = grid.core(CarvingSettings().core_agreement)
             graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,
@@ -447,8 +448,8 @@ def test_the_rendered_sample_gets_every_crossing_right_with_images_loaded_lazily
         return load
 
     images = [read_image(folder / "images" / c.name) for c in cameras]
-    colour = auto_colour(images[0])
-    segs = [segment_frame(image, colour) for image in images]
+    colour, model = sequence_colour([images[k] for k in reference_frames(len(images), 0, 3)])
+    segs = [segment_frame(image, colour, model=model) for image in images]
     grid = carve(cameras, [s.mask for s in segs], [s.junctions for s in segs])
     core = grid.core(CarvingSettings().core_agreement)
     graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,

@@ -1,0 +1,132 @@
+"""``python -m engine bench looks``: the masks on every look family, tuning and held-out.
+
+Each scene is segmented as a user's run would be: the cable found automatically on a few
+frames (:func:`.segmentation.sequence_colour`), its colour model learnt there, every frame
+segmented with it. Beside each row, the *naive* mask: a plain threshold (saturation above 60
+and value above 40 in OpenCV's HSV; a colourless cable: value below or above Otsu's split,
+whichever side is smaller). Rows: each look family on its tuning seeds and on its held-out
+seeds (:data:`.synthetic_looks.TUNING_SEEDS`, :data:`.synthetic_looks.HELD_OUT_SEEDS`; code is
+tuned on the first only), the pre-rendered Cycles captures in ``samples/looks`` (held out) and
+real photos with labels (``../shared/real/mbest-s1``, when present).
+"""
+
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .image_sequence import read_image
+from .segmentation import SegmentationSettings, reference_frames, segment_frame, sequence_colour
+from .synthetic_looks import HELD_OUT_SEEDS, LOOK_FAMILIES, TUNING_SEEDS
+from .synthetic_scene import look_scene
+
+__all__ = ["bench_looks", "naive_mask", "score_sequence"]
+
+#: A scene counts as "cable found" when its mean IoU is above this.
+FOUND_IOU = 0.5
+
+
+def naive_mask(image_rgb):
+    """The plain threshold the bench compares against (see the module docstring)."""
+    hsv = cv2.cvtColor(np.ascontiguousarray(image_rgb), cv2.COLOR_RGB2HSV)
+    coloured = (hsv[..., 1] > 60) & (hsv[..., 2] > 40)
+    if coloured.mean() > 0.002:
+        return coloured
+    threshold, _ = cv2.threshold(hsv[..., 2], 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    dark = hsv[..., 2] <= threshold
+    return dark if dark.mean() < 0.5 else ~dark
+
+
+def _iou(a, b):
+    return float((a & b).sum() / max((a | b).sum(), 1))
+
+
+def score_sequence(images, truths, settings=SegmentationSettings()):
+    """Mask IoU of every frame (ours and the naive threshold's) and our time per frame.
+
+    Returns
+    -------
+    dict
+        ``iou``, ``naive`` (lists, one per frame), ``ms_per_frame`` and ``hsv``.
+    """
+    started = time.perf_counter()
+    frames = reference_frames(len(images), 0, settings.model_frames)
+    colour, model = sequence_colour([images[k] for k in frames], None, settings)
+    ious = [_iou(segment_frame(image, colour, settings, model=model).mask, truth)
+            for image, truth in zip(images, truths)]
+    seconds = time.perf_counter() - started
+    return {"iou": ious, "naive": [_iou(naive_mask(i), t) for i, t in zip(images, truths)],
+            "ms_per_frame": 1000.0 * seconds / len(images), "hsv": str(colour)}
+
+
+def _row(name, split, scores):
+    scene_iou = [float(np.mean(s["iou"])) for s in scores]
+    return {"looks": name, "set": split, "scenes": len(scores),
+            "iou_mean": float(np.mean(scene_iou)), "iou_worst_scene": float(np.min(scene_iou)),
+            "iou_worst_frame": float(min(np.min(s["iou"]) for s in scores)),
+            "naive_iou_mean": float(np.mean([np.mean(s["naive"]) for s in scores])),
+            "cable_found": f"{sum(v > FOUND_IOU for v in scene_iou)}/{len(scores)}",
+            "ms_per_frame": float(np.mean([s["ms_per_frame"] for s in scores]))}
+
+
+def _read_capture(folder, mask_folder):
+    paths = sorted(p for p in (folder / "images").iterdir() if p.suffix.lower() in
+                   (".jpg", ".jpeg", ".png"))
+    images = [read_image(p) for p in paths]
+    truths = [cv2.imread(str(folder / mask_folder / (p.stem + ".png")), cv2.IMREAD_GRAYSCALE)
+              > 127 for p in paths]
+    return images, truths
+
+
+def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samples") / "looks",
+                real=Path("..") / "shared" / "real" / "mbest-s1",
+                settings=SegmentationSettings(), families=LOOK_FAMILIES):
+    """One row per look family and seed set, then the Cycles captures and real photos.
+
+    Parameters
+    ----------
+    seeds : int, optional
+        Scenes per family and set (the first seeds of each set).
+    views, width, height : int, optional
+        Of each synthetic scene.
+    captures : path, optional
+        Folder of pre-rendered captures (``<look>/images``, ``<look>/masks``).
+    real : path, optional
+        Real photos with labels (``images/``, ``labels/``); skipped when missing.
+    settings : SegmentationSettings, optional
+    families : sequence of str, optional
+
+    Returns
+    -------
+    list of dict
+    """
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    rows, every = [], {"tuning": [], "held-out": []}
+    try:
+        for family in families:
+            for split, pool in (("tuning", TUNING_SEEDS), ("held-out", HELD_OUT_SEEDS)):
+                scores = []
+                for seed in pool[:seeds]:
+                    scene = look_scene(family, seed, views=views, width=width, height=height)
+                    scores.append(score_sequence(list(scene.images), list(scene.masks),
+                                                 settings))
+                every[split] += scores
+                rows.append(_row(family, split, scores))
+        for split, scores in every.items():
+            rows.append(_row("all families", split, scores))
+        captures = Path(captures)
+        if captures.is_dir():
+            scores = [score_sequence(*_read_capture(folder, "masks"), settings)
+                      for folder in sorted(captures.iterdir())
+                      if (folder / "ground_truth.json").is_file()]
+            if scores:
+                rows.append(_row("Cycles captures", "held-out", scores))
+        real = Path(real)
+        if (real / "labels").is_dir():
+            rows.append(_row(f"real photos ({real.name})", "held-out",
+                             [score_sequence(*_read_capture(real, "labels"), settings)]))
+    finally:
+        cv2.setNumThreads(threads)
+    return rows
