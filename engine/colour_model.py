@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.ndimage import gaussian_filter, maximum
+from scipy.ndimage import gaussian_filter
 
 from .colour_range import ColourRange, hsv_image
 from .errors import ReconstructionError
@@ -96,10 +96,32 @@ def thin_pieces(mask, *, min_elongation=8.0, min_area=12):
     return labels, thin, half_width, area
 
 
-def thickest(mask, labels, count):
-    """Per label (0 to ``count - 1``): the radius of the largest disc inside the piece."""
-    distance = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_5)
-    return np.asarray(maximum(distance, labels, index=np.arange(count)), dtype=float)
+def thickest(mask, labels, pieces, stats=None):
+    """The radius of the largest disc inside each of some pieces of a mask.
+
+    Parameters
+    ----------
+    mask : ndarray of bool
+    labels : ndarray of int32
+        Its connected pieces (:func:`thin_pieces`).
+    pieces : sequence of int
+        The labels to measure.
+    stats : ndarray, optional
+        ``cv2.connectedComponentsWithStats``'s statistics of ``labels`` (their boxes).
+
+    Returns
+    -------
+    ndarray, shape (len(pieces),)
+    """
+    if stats is None:
+        stats = cv2.connectedComponentsWithStats(mask.view(np.uint8), 8, cv2.CV_32S)[2]
+    radii = np.zeros(len(pieces))
+    for index, piece in enumerate(pieces):
+        x, y, w, h = stats[piece, :4]
+        box = np.pad(labels[y:y + h, x:x + w] == piece, 1)
+        radii[index] = cv2.distanceTransform(box.view(np.uint8), cv2.DIST_L2,
+                                             cv2.DIST_MASK_5).max()
+    return radii
 
 
 @dataclass(frozen=True)
@@ -456,7 +478,8 @@ class ColourModel:
 
     def adapted(self, image_rgb, seed, width, *, weight=0.5):
         """The model mixed with one frame's own histograms (seeded by ``seed``): exposure
-        and white balance drift along a sequence.
+        and white balance drift along a sequence. The frame may be reduced (its colours are
+        as well told by a quarter of its pixels); ``seed`` and ``width`` are at its size.
 
         Returns
         -------

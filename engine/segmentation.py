@@ -82,8 +82,10 @@ class SegmentationSettings:
     probability : float
         A pixel is cable when the model gives its colour at least this probability.
     probability_near : float
-        Within half a cable width of such pixels, this probability is enough, or being in the
-        colour range.
+        Within ``near_reach`` cable widths of such pixels, this probability is enough, or
+        being in the colour range.
+    near_reach : float
+        See ``probability_near``.
     range_share : float
         The colour range counts there only when it holds at most this many times the sure
         pixels.
@@ -109,7 +111,8 @@ class SegmentationSettings:
     model_smoothing: float = 1.0
     adapt_rounds: int = 1
     probability: float = 0.5
-    probability_near: float = 0.1
+    probability_near: float = 0.3
+    near_reach: float = 0.5
     range_share: float = 3.0
     blob_elongation: float = 10.0
     blob_thickness: float = 1.0
@@ -313,7 +316,7 @@ def learn_colour_model(images_rgb, colour, settings=SegmentationSettings()):
         return None
 
 
-def _model_mask(image_rgb, model, settings, in_range=None):
+def _model_mask(image_rgb, model, settings, in_range=None, *, grow=True):
     """Pixels the model calls cable: ``(sure, sure or likely)``. Sure at ``probability``;
     likely within half a cable width of a sure one, at ``probability_near`` or inside the
     colour range (a cable's shade side, or a strand darkened where another passes over it,
@@ -322,11 +325,12 @@ def _model_mask(image_rgb, model, settings, in_range=None):
     striped cable holds the whole frame)."""
     probability = cv2.GaussianBlur(model.probability(image_rgb), (3, 3), 0)
     sure = probability >= 255.0 * settings.probability
-    if not settings.probability_near < settings.probability:
+    if not (grow and settings.probability_near < settings.probability):
         return sure, sure
     small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
                        interpolation=cv2.INTER_AREA) > 0
-    reach = max(int(round(cable_width(_opened(small)))), 1)  # half a width, full size
+    # the half-size width is half the full-size width: reach = near_reach widths, full size
+    reach = max(int(round(2.0 * settings.near_reach * cable_width(_opened(small)))), 1)
     near = cv2.dilate(sure.view(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
     likely = probability >= 255.0 * settings.probability_near
@@ -340,10 +344,13 @@ def _drop_blobs(mask, width, settings):
     than ``2 * blob_thickness`` cable widths and shorter than ``blob_elongation`` widths."""
     labels, thin, _, area = thin_pieces(mask, min_elongation=settings.blob_elongation,
                                         min_area=0)
-    blob = ~thin & (thickest(mask, labels, len(area)) > settings.blob_thickness * width)
-    blob[0] = False
-    if not blob.any():
+    # only short pieces larger than a disc of that radius can be objects
+    short = np.flatnonzero(~thin & (area > math.pi * (settings.blob_thickness * width) ** 2))
+    short = short[short > 0]
+    if not len(short):
         return mask
+    blob = np.zeros(len(area), dtype=bool)
+    blob[short] = thickest(mask, labels, short) > settings.blob_thickness * width
     return mask & ~blob[labels]
 
 
@@ -377,15 +384,18 @@ def _cable_masks(image_rgb, colour, settings, model=None):
         model, rounds = learn_colour_model([image_rgb], colour, settings), 0
     if settings.model and model is not None:
         in_range = colour.select(hsv)
-        sure, raw = _model_mask(image_rgb, model, settings, in_range)
-        for _ in range(rounds):  # the frame's own colours, seeded by its sure pixels
-            labels, thin, _, _ = thin_pieces(_opened(sure))
+        sure, raw = _model_mask(image_rgb, model, settings, in_range, grow=not rounds)
+        if rounds:  # the frame's own colours (at half size), seeded by its sure pixels
+            size = (image_rgb.shape[1] // 2, image_rgb.shape[0] // 2)
+            reduced = cv2.resize(image_rgb, size, interpolation=cv2.INTER_AREA)
+        for done in range(1, rounds + 1):
+            labels, thin, _, _ = thin_pieces(cv2.resize(sure.view(np.uint8), size,
+                                                        interpolation=cv2.INTER_AREA) > 0)
             seed = thin[labels]
-            if not seed.any():
-                break
-            sure, raw = _model_mask(image_rgb, model.adapted(image_rgb, seed,
-                                                             cable_width(seed)), settings,
-                                    in_range)
+            if seed.any():
+                model = model.adapted(reduced, seed, cable_width(seed))
+            sure, raw = _model_mask(image_rgb, model, settings, in_range,
+                                    grow=done == rounds)
     else:
         raw = colour.select(hsv)
     raw = _opened(raw).view(np.uint8)
