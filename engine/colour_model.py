@@ -418,17 +418,23 @@ class ColourModel:
         The cable's share of the pixels (a colour as common in the cable as in the background
         is background).
     smoothing : float
-        The smoothing they had, bins (a frame's own histograms get the same).
+        The smoothing they had, bins.
+
+    Attributes
+    ----------
+    luts : list of ndarray, shape (bins, bins, bins)
+        Per colour space, each bin's probability (0 to 255).
     """
 
     def __init__(self, histograms, prior, smoothing=1.0):
         self.histograms, self.prior, self.smoothing = histograms, prior, smoothing
         self.bins = histograms[0][0].shape[0]
-        self._mats = []
+        self.luts, self._mats = [], []
         for cable, background in histograms:
             weighted = prior * cable
             probability = weighted / (weighted + (1.0 - prior) * background + 1e-9)
             lut = np.ascontiguousarray(255.0 * probability, dtype=np.float32)
+            self.luts.append(lut)
             # as one 3-D Mat: OpenCV's bindings would read a (b, b, b) array as b channels
             self._mats.append(cv2.Mat(lut, wrap_channels=False))
 
@@ -475,23 +481,6 @@ class ColourModel:
             raise ValueError("the colour model needs cable and background samples")
         prior = float(np.clip(cable.sum() / (cable.sum() + background.sum()), *prior_range))
         return cls(cls._smoothed(counts, smoothing), prior, smoothing)
-
-    def adapted(self, image_rgb, seed, width, *, weight=0.5):
-        """The model mixed with one frame's own histograms (seeded by ``seed``): exposure
-        and white balance drift along a sequence. The frame may be reduced (its colours are
-        as well told by a quarter of its pixels); ``seed`` and ``width`` are at its size.
-
-        Returns
-        -------
-        ColourModel
-            ``self`` when the frame gives no cable or no background sample.
-        """
-        counts = _histograms([image_rgb], [seed], [width], self.bins)
-        if counts[0][0].sum() == 0 or counts[0][1].sum() == 0:
-            return self
-        mixed = [tuple((1 - weight) * mine + weight * theirs for mine, theirs in zip(a, b))
-                 for a, b in zip(self.histograms, self._smoothed(counts, self.smoothing))]
-        return ColourModel(mixed, self.prior, self.smoothing)
 
     def probability(self, image_rgb):
         """Per pixel, 0 to 255: how likely its colour is the cable's (uint8), the mean over

@@ -1,10 +1,14 @@
-"""Cable masks and junction maps from images (paper §3.1).
+"""Cable masks and junction maps from images (paper §3.1, and beyond it).
 
-A cable is found by its colour: an HSV range set on one frame (by hand, from a picked pixel,
-or automatically from the frame's dominant saturated colour) and applied to every frame. A
-cable with no colour of its own, darker or lighter than a grey background, is found by its
-brightness instead. Specks are removed, the desaturated specular streak along a glossy cable
-is filled back in, and the cable's width in pixels is measured per frame.
+The paper thresholds an HSV range set on one frame. Here the range (set by hand, picked, or
+found automatically: :func:`.colour_model.find_cable` picks the most cable-like group of colour
+clusters, not the most saturated colour) only seeds a colour model of the cable against the
+background learnt on a few frames of the sequence (:func:`sequence_colour`,
+:class:`.colour_model.ColourModel`). Each frame's pixels are classified by that model: sure
+pixels, and likely ones right beside them (a shade side, a strand darkened under another).
+Specks and pieces shaped like objects rather than cable are removed, the desaturated specular
+streak along a glossy cable is filled back in, the outline is refined along its normal
+(:func:`refine_edges`), and the cable's width in pixels is measured per frame.
 
 Junctions are where the cable overlaps itself: forks of the mask's skeleton where a disc holds
 more cable than a single strand can (:func:`junction_centres`). Every length is derived from
@@ -76,9 +80,6 @@ class SegmentationSettings:
     model_smoothing : float
         Smoothing of the model's colour histograms, in bins of 8 levels: colours near the
         cable's (its shading the range missed) count as cable.
-    adapt_rounds : int
-        Each frame mixes the sequence's model with its own colours (seeded by its mask) this
-        many times: exposure and white balance drift along a sequence.
     probability : float
         A pixel is cable when the model gives its colour at least this probability.
     probability_near : float
@@ -109,9 +110,8 @@ class SegmentationSettings:
     model: bool = True
     model_frames: int = 3
     model_smoothing: float = 1.0
-    adapt_rounds: int = 1
     probability: float = 0.5
-    probability_near: float = 0.3
+    probability_near: float = 0.4
     near_reach: float = 0.5
     range_share: float = 3.0
     blob_elongation: float = 10.0
@@ -316,7 +316,7 @@ def learn_colour_model(images_rgb, colour, settings=SegmentationSettings()):
         return None
 
 
-def _model_mask(image_rgb, model, settings, in_range=None, *, grow=True):
+def _model_mask(image_rgb, model, settings, in_range=None):
     """Pixels the model calls cable: ``(sure, sure or likely)``. Sure at ``probability``;
     likely within half a cable width of a sure one, at ``probability_near`` or inside the
     colour range (a cable's shade side, or a strand darkened where another passes over it,
@@ -325,7 +325,7 @@ def _model_mask(image_rgb, model, settings, in_range=None, *, grow=True):
     striped cable holds the whole frame)."""
     probability = cv2.GaussianBlur(model.probability(image_rgb), (3, 3), 0)
     sure = probability >= 255.0 * settings.probability
-    if not (grow and settings.probability_near < settings.probability):
+    if not settings.probability_near < settings.probability:
         return sure, sure
     small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
                        interpolation=cv2.INTER_AREA) > 0
@@ -379,23 +379,10 @@ def _cable_masks(image_rgb, colour, settings, model=None):
     from (on the realistic sample, junctions from the refined outline put 12% of their pixels
     farther than 3 r from any crossing; from the colour range's mask, 3.5%)."""
     hsv = _hsv(image_rgb)
-    rounds = settings.adapt_rounds
-    if settings.model and model is None:  # learnt from this frame: nothing to adapt
-        model, rounds = learn_colour_model([image_rgb], colour, settings), 0
+    if settings.model and model is None:
+        model = learn_colour_model([image_rgb], colour, settings)
     if settings.model and model is not None:
-        in_range = colour.select(hsv)
-        sure, raw = _model_mask(image_rgb, model, settings, in_range, grow=not rounds)
-        if rounds:  # the frame's own colours (at half size), seeded by its sure pixels
-            size = (image_rgb.shape[1] // 2, image_rgb.shape[0] // 2)
-            reduced = cv2.resize(image_rgb, size, interpolation=cv2.INTER_AREA)
-        for done in range(1, rounds + 1):
-            labels, thin, _, _ = thin_pieces(cv2.resize(sure.view(np.uint8), size,
-                                                        interpolation=cv2.INTER_AREA) > 0)
-            seed = thin[labels]
-            if seed.any():
-                model = model.adapted(reduced, seed, cable_width(seed))
-            sure, raw = _model_mask(image_rgb, model, settings, in_range,
-                                    grow=done == rounds)
+        _, raw = _model_mask(image_rgb, model, settings, colour.select(hsv))
     else:
         raw = colour.select(hsv)
     raw = _opened(raw).view(np.uint8)

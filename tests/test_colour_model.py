@@ -1,0 +1,106 @@
+"""The automatic choice of the cable and its colour model (engine.colour_model)."""
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from engine.colour_model import _SPACES, ColourModel, find_cable, thin_pieces
+from engine.errors import ReconstructionError
+from engine.image_sequence import read_image
+from engine.look_benchmark import naive_mask
+from engine.segmentation import reference_frames, segment_frame, sequence_colour
+from engine.synthetic_scene import look_scene
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "real" / "mbest-s1"
+
+
+def iou(a, b):
+    return (a & b).sum() / max((a | b).sum(), 1)
+
+
+def test_thin_pieces_tell_a_cable_from_a_box():
+    mask = np.zeros((200, 300), np.uint8)
+    cv2.polylines(mask, [np.array([[10, 20], [150, 60], [280, 30]], np.int32)], False, 1, 7)
+    cv2.rectangle(mask, (40, 120), (90, 170), 1, -1)
+    labels, thin, half_width, area = thin_pieces(mask > 0)
+    line, box = labels[22, 12], labels[140, 60]
+    assert thin[line] and not thin[box]
+    # the ridge's distance to the outside is half the width plus half a pixel
+    assert 6.0 <= 2 * half_width[line] <= 10.0  # a 7 px line
+
+
+def test_the_model_looks_colours_up_as_its_histograms_say():
+    rng = np.random.default_rng(1)
+    image = np.full((120, 160, 3), (120, 110, 90), np.uint8)
+    image = np.clip(image + rng.normal(0, 6, image.shape), 0, 255).astype(np.uint8)
+    seed = np.zeros(image.shape[:2], bool)
+    seed[50:58, 10:150] = True
+    image[seed] = (200, 40, 40)
+    model = ColourModel.learn([image], [seed], widths=[8.0])
+    probability = model.probability(image)
+    assert probability[seed].min() > 200 and probability[~seed].max() < 60
+    # the mean of the two colour spaces' look-ups, bin by bin (OpenCV's bindings would read a
+    # (b, b, b) table as b channels of a 2-D one: the look-up must stay 3-D)
+    expected = np.zeros(image.shape[:2])
+    for space, lut in zip(_SPACES, model.luts):
+        index = space(image).astype(int) * lut.shape[0] // 256
+        expected += 0.5 * lut[index[..., 0], index[..., 1], index[..., 2]]
+    assert np.abs(probability - expected).max() <= 1.0
+
+
+@pytest.mark.parametrize("family", ["pale", "air", "neutral", "patterned", "clutter"])
+def test_the_cable_is_found_on_every_look(family):
+    scene = look_scene(family, 0, views=10, width=640, height=480)
+    frames = [scene.images[k] for k in reference_frames(10, 0, 3)]
+    colour, candidate = find_cable(frames)
+    found = candidate.select_rgb(scene.images[0])
+    truth = scene.masks[0]
+    # most of what is chosen lies on the cable, and it covers much of the cable
+    assert (found & truth).sum() > 0.5 * found.sum()
+    assert (found & truth).sum() > 0.3 * truth.sum()
+
+
+def test_a_cast_shadow_is_not_the_cable():
+    scene = look_scene("air", 3, views=10, width=640, height=480)
+    colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
+    masks = [segment_frame(image, colour, model=model).mask for image in scene.images]
+    ious = [iou(mask, truth) for mask, truth in zip(masks, scene.masks)]
+    assert np.mean(ious) > 0.8
+    # beats a plain threshold, which takes the shadow or the table
+    assert np.mean(ious) > np.mean([iou(naive_mask(i), t)
+                                    for i, t in zip(scene.images, scene.masks)])
+
+
+def test_a_net_of_thin_lines_is_not_the_cable():
+    # dark grout lines between tiles are thin too, but enclose many holes
+    image = np.full((480, 640, 3), (150, 170, 150), np.uint8)
+    for x in range(0, 640, 60):
+        cv2.line(image, (x, 0), (x, 479), (40, 45, 40), 4)
+    for y in range(0, 480, 60):
+        cv2.line(image, (0, y), (639, y), (40, 45, 40), 4)
+    curve = np.array([[60, 400], [200, 120], [380, 330], [580, 90]], np.int32)
+    cable = np.zeros(image.shape[:2], np.uint8)
+    cv2.polylines(cable, [curve], False, 1, 9)
+    image[cable > 0] = (150, 60, 200)
+    _, candidate = find_cable([image])
+    found = candidate.select_rgb(image)
+    assert (found & (cable > 0)).sum() > 0.8 * found.sum()
+
+
+def test_no_cable_is_a_clear_error():
+    with pytest.raises(ReconstructionError, match="no cable pixels"):
+        find_cable([np.full((240, 320, 3), 128, np.uint8)])
+
+
+@pytest.mark.skipif(not (REAL / "labels").is_dir(), reason="the real photos are not here")
+def test_real_photos_of_a_pink_cable_on_black():
+    paths = sorted((REAL / "images").iterdir())
+    images = [read_image(p) for p in paths]
+    labels = [cv2.imread(str(REAL / "labels" / (p.stem + ".png")), cv2.IMREAD_GRAYSCALE) > 127
+              for p in paths]
+    colour, model = sequence_colour([images[k] for k in reference_frames(len(images), 0, 3)])
+    ours = [iou(segment_frame(i, colour, model=model).mask, t) for i, t in zip(images, labels)]
+    naive = [iou(naive_mask(i), t) for i, t in zip(images, labels)]
+    assert np.mean(ours) >= 0.90 and np.mean(ours) > np.mean(naive)
