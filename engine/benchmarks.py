@@ -15,7 +15,8 @@ import numpy as np
 
 from .ground_truth import read_ground_truth
 from .image_sequence import read_image
-from .segmentation import SegmentationSettings, auto_colour, segment_frame
+from .segmentation import (SegmentationSettings, reference_frames, segment_frame,
+                           sequence_colour)
 from .synthetic_scene import SceneSpec, make_scene
 
 __all__ = ["bench_segment", "junction_scores", "format_table", "in_fresh_process",
@@ -57,11 +58,14 @@ def junction_scores(junctions, truth, camera):
 
 
 def _score_frames(name, images, masks, truth, settings):
-    colour = auto_colour(images[0])
+    """As a reconstruction segments: the cable found and its colour model learnt on a few
+    frames (not timed), then every frame segmented with it (timed)."""
+    frames = reference_frames(len(images), 0, settings.model_frames)
+    colour, model = sequence_colour([images[k] for k in frames], None, settings)
     ious, found, visible, stray, total = [], 0, 0, 0, 0
     started = time.perf_counter()
     for image, mask, camera in zip(images, masks, truth.cameras):
-        segmentation = segment_frame(image, colour, settings)
+        segmentation = segment_frame(image, colour, settings, model=model)
         ious.append((segmentation.mask & mask).sum() / max((segmentation.mask | mask).sum(), 1))
         f, v, s, t = junction_scores(segmentation.junctions, truth, camera)
         found, visible, stray, total = found + f, visible + v, stray + s, total + t
@@ -69,7 +73,7 @@ def _score_frames(name, images, masks, truth, settings):
     plain = replace(settings, edge_reach=0)
     started = time.perf_counter()
     for image in images:
-        segment_frame(image, colour, plain)
+        segment_frame(image, colour, plain, model=model)
     plain_seconds = time.perf_counter() - started
     return {"scene": name, "frames": len(images), "size": f"{images[0].shape[1]}x"
             f"{images[0].shape[0]}", "iou_mean": float(np.mean(ious)),

@@ -22,7 +22,8 @@ from .benchmarks import in_fresh_process
 from .camera import Camera
 from .carving import CarvingSettings, carve
 from .segment_graph import extract_segment_graph
-from .segmentation import auto_colour, cable_width, junction_map, segment_frame
+from .segmentation import (cable_width, junction_map, reference_frames, segment_frame,
+                           sequence_colour)
 from .synthetic_cameras import orbit_cameras
 from .synthetic_render import render_masks
 from .synthetic_scene import SceneSpec, make_scene
@@ -112,8 +113,9 @@ def _scene_rows(specs, settings, folder, cells):
     rows = []
     for label, spec in specs:
         scene = make_scene(spec)
-        colour = auto_colour(scene.images[0])
-        segmentations = [segment_frame(image, colour) for image in scene.images]
+        frames = [scene.images[k] for k in reference_frames(len(scene.images), 0, 3)]
+        colour, model = sequence_colour(frames)  # as the reconstruction segments
+        segmentations = [segment_frame(image, colour, model=model) for image in scene.images]
         place = Path(folder) / label.replace(" ", "_")
         place.mkdir()
         paths = _write_masks(place, [s.mask for s in segmentations],

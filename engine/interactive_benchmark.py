@@ -32,7 +32,9 @@ __all__ = ["bench_preview", "bench_curve", "bench_cancel"]
 
 
 def bench_preview(*, sample=DEFAULT_SAMPLE, repeats=10):
-    """Milliseconds per preview refresh at 960x720 up to 4K (the sample's first frame)."""
+    """Milliseconds per preview refresh at 960x720 up to 4K (the sample's first frame), with
+    the colour range found automatically once (as after the panel's Automatic button): each
+    refresh segments the frame with a colour model learnt from it."""
     with open_image_sequence(Path(sample) / "images") as sequence:
         frame = sequence.read(0)
     colour = auto_colour(frame)

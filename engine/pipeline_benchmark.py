@@ -63,6 +63,9 @@ def _run(folder, truth_file, use_true_cameras, masks=None):
                              masks=masks)
     except (ReconstructionError, ValueError, MemoryError) as error:
         return {"error": str(error)[:80], "total_s": time.perf_counter() - started}
+    except Exception as error:  # a bug: the row says so, the bench goes on
+        return {"error": f"bug: {type(error).__name__}: {error}"[:80],
+                "total_s": time.perf_counter() - started}
     total = time.perf_counter() - started
     metrics = evaluate(result, truth, align=not use_true_cameras)
     row = {"accuracy_mean": metrics.accuracy_mean, "accuracy_p95": metrics.accuracy_p95,

@@ -859,7 +859,9 @@ def _voxels_by_owner(topology, fronts):
     for u, v, key, data in g.edges(keys=True, data=True):
         owner[np.asarray(_flatten(_edge_beads(g, data)), dtype=np.int64)] = len(keys)
         keys.append(("edge", u, v, key))
-    voxel_owner = np.where(fronts.label >= 0, owner[fronts.label], -1)
+    voxel_owner = np.full(fronts.label.shape, -1, dtype=np.int64)
+    labelled = fronts.label >= 0  # (no front at all: nothing is owned)
+    voxel_owner[labelled] = owner[fronts.label[labelled]]
     coords = fronts.voxels.coords
     return {key: coords[group] for key, group in zip(keys, _group(voxel_owner, len(keys)))}
 
