@@ -31,7 +31,7 @@ from .errors import ReconstructionError
 
 __all__ = ["ColourModel", "find_cable", "find_cable_colour", "thin_pieces", "thickest",
            "colour_candidates",
-           "CandidateScore", "CableCandidate"]
+           "CableCandidate", "opened"]
 
 #: Frames are clustered and scored at this size (the longer side, pixels).
 _SMALL = 480
@@ -45,13 +45,13 @@ _GROW = float(os.environ.get("GROW", "0"))
 
 
 def _small(image_rgb, size=_SMALL):
-    """The frame reduced so its longer side is at most ``size`` pixels, and the factor."""
+    """The frame reduced so its longer side is at most ``size`` pixels."""
     rows, cols = image_rgb.shape[:2]
     factor = max(rows, cols) / size
     if factor <= 1:
-        return image_rgb, 1.0
+        return image_rgb
     shape = (int(round(cols / factor)), int(round(rows / factor)))
-    return cv2.resize(image_rgb, shape, interpolation=cv2.INTER_AREA), factor
+    return cv2.resize(image_rgb, shape, interpolation=cv2.INTER_AREA)
 
 
 def _lab(image_rgb):
@@ -124,27 +124,16 @@ def thickest(mask, labels, pieces, stats=None):
     return radii
 
 
-@dataclass(frozen=True)
-class CandidateScore:
-    """How cable-like a candidate colour is on one frame (see :func:`find_cable_colour`)."""
-
-    score: float
-    thin_share: float
-    length: float
-    contrast: float
-    coverage: float
-
-
 def _score(mask, lab, diagonal):
-    """Score one candidate mask (see the module docstring)."""
+    """How cable-like a candidate mask is (see the module docstring); 0 if not at all."""
     coverage = mask.mean()
     if coverage < 5e-4 or coverage > _MAX_COVERAGE:
-        return CandidateScore(0.0, 0.0, 0.0, 0.0, float(coverage))
+        return 0.0
     labels, thin, half_width, area = thin_pieces(mask)
     thin_area = area[thin].sum()
     thin_share = thin_area / max(mask.sum(), 1)
     if not thin.any():
-        return CandidateScore(0.0, 0.0, 0.0, 0.0, float(coverage))
+        return 0.0
     lengths = np.sort(area[thin] / np.maximum(2.0 * half_width[thin], 1e-9))[::-1]
     length = float(lengths[:3].sum() / diagonal)
     # contrast against a ring around the thin pieces
@@ -154,7 +143,7 @@ def _score(mask, lab, diagonal):
     ring = (cv2.dilate(cable.view(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))) > 0) & ~mask
     if not ring.any():
-        return CandidateScore(0.0, float(thin_share), length, 0.0, float(coverage))
+        return 0.0
     inside, outside = np.median(lab[cable], axis=0), np.median(lab[ring], axis=0)
     lightness, chroma = abs(inside[0] - outside[0]), np.hypot(*(inside[1:] - outside[1:]))
     contrast = float(np.hypot(lightness, 2.0 * chroma))
@@ -163,13 +152,13 @@ def _score(mask, lab, diagonal):
     holes = int((holes[1:, cv2.CC_STAT_AREA] > 4.0 * width * width).sum()) - 1
     net = 1.0 / (1.0 + max(holes - _MAX_LOOPS, 0) / _MAX_LOOPS)
     score = thin_share ** 2 * min(length, 1.5) * contrast * net
-    return CandidateScore(float(score), float(thin_share), length, contrast, float(coverage))
+    return float(score)
 
 
 def _clusters(image_rgb, clusters=_CLUSTERS):
     """The frame at the scoring size, in Lab, each pixel's colour cluster (k-means) and the
     clusters' centres (Lab)."""
-    small, _ = _small(image_rgb)
+    small = _small(image_rgb)
     lab = _lab(small)
     samples = lab.reshape(-1, 3)[::3].astype(np.float32)
     cv2.setRNGSeed(7)  # the same frame, the same clusters
@@ -184,7 +173,8 @@ def _nearest(lab, centres):
     return np.argmin(distance, axis=1).reshape(lab.shape[:2])
 
 
-def _opened(mask):
+def opened(mask):
+    """A 3x3 cross opening (a symmetric kernel: an even one would shift the mask a pixel)."""
     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, cross) > 0
 
@@ -262,8 +252,8 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3):
         if sum(coverage[k] for k in key) > _MAX_COVERAGE:  # too much of the frame
             return 0.0
         if key not in scored:
-            value = _score(_opened(np.any([single[k] for k in key], axis=0)), lab,
-                           diagonal).score
+            value = _score(opened(np.any([single[k] for k in key], axis=0)), lab,
+                           diagonal)
             scored[key] = value * float(np.prod([penalty[k] for k in key]))
         return scored[key]
 
@@ -287,7 +277,7 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3):
         groups[tuple(sorted(members))] = best
     ranked = sorted(groups.items(), key=lambda item: -item[1])[:keep]
     return small, [CableCandidate(value, members, centres,
-                                  _opened(np.any([single[k] for k in members], axis=0)))
+                                  opened(np.any([single[k] for k in members], axis=0)))
                    for members, value in ranked]
 
 
@@ -338,13 +328,13 @@ def find_cable(images_rgb):
                                   "the frames (pick the cable's colour, or give --hsv)")
     totals = np.array([candidate.score for candidate in candidates], dtype=float)
     for image in images_rgb[1:]:  # agreement across frames: each candidate scored on the others
-        other, _ = _small(image)
+        other = _small(image)
         other_lab = _lab(other)
         diagonal = math.hypot(*other.shape[:2])
         labels = _nearest(other_lab, candidates[0].centres)
         for index, candidate in enumerate(candidates):
-            totals[index] += _score(_opened(np.isin(labels, candidate.members)), other_lab,
-                                    diagonal).score
+            totals[index] += _score(opened(np.isin(labels, candidate.members)), other_lab,
+                                    diagonal)
     best = candidates[int(np.argmax(totals))]
     return _range_of(hsv_image(small)[best.mask]), best
 

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .colour_model import ColourModel, find_cable, find_cable_colour, thickest, thin_pieces
+from .colour_model import (ColourModel, find_cable, find_cable_colour, opened, thickest,
+                           thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 
@@ -127,9 +128,6 @@ class FrameSegmentation:
     width: float
 
 
-_hsv = hsv_image
-
-
 def _hue_peak(hues, weights=None):
     histogram = np.bincount(hues.ravel(), weights=None if weights is None else weights.ravel(),
                             minlength=180)[:180].astype(float)
@@ -190,7 +188,7 @@ def colour_at(image_rgb, x, y, *, radius=3):
         A hue band around the picked colour with saturation and value ranges that admit its
         shading; a brightness range if the picked pixel has no colour of its own.
     """
-    hsv = _hsv(image_rgb)
+    hsv = hsv_image(image_rgb)
     rows, cols = hsv.shape[:2]
     if not (0 <= x < cols and 0 <= y < rows):
         raise ValueError(f"pixel ({x}, {y}) lies outside the {cols}x{rows} frame")
@@ -260,12 +258,6 @@ def _cable_box(mask, margin):
                  max(cols[0] - margin, 0):cols[-1] + margin + 1]
 
 
-def _opened(mask):
-    """A 3x3 cross opening (a symmetric kernel: an even one would shift the mask a pixel)."""
-    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
-    return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, cross) > 0
-
-
 def colour_seed(image_rgb, colour):
     """The cable's sure pixels in a frame: the thin pieces of a colour range's (or a found
     candidate's) pixels; the pieces shaped like objects; the cable's width.
@@ -280,7 +272,7 @@ def colour_seed(image_rgb, colour):
     seed, objects : ndarray of bool
     width : float
     """
-    labels, thin, half_width, area = thin_pieces(_opened(colour.select_rgb(image_rgb)))
+    labels, thin, half_width, area = thin_pieces(opened(colour.select_rgb(image_rgb)))
     seed = thin[labels]
     width = cable_width(seed)
     objects = ~thin & (half_width > 0.5 * width) & (area > 4 * width * width)
@@ -330,7 +322,7 @@ def _model_mask(image_rgb, model, settings, in_range=None):
     small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
                        interpolation=cv2.INTER_AREA) > 0
     # the half-size width is half the full-size width: reach = near_reach widths, full size
-    reach = max(int(round(2.0 * settings.near_reach * cable_width(_opened(small)))), 1)
+    reach = max(int(round(2.0 * settings.near_reach * cable_width(opened(small)))), 1)
     near = cv2.dilate(sure.view(np.uint8), cv2.getStructuringElement(
         cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
     likely = probability >= 255.0 * settings.probability_near
@@ -378,14 +370,14 @@ def _cable_masks(image_rgb, colour, settings, model=None):
     (:func:`refine_edges`) and the mask before that, whose topology the junctions are read
     from (on the realistic sample, junctions from the refined outline put 12% of their pixels
     farther than 3 r from any crossing; from the colour range's mask, 3.5%)."""
-    hsv = _hsv(image_rgb)
+    hsv = hsv_image(image_rgb)
     if settings.model and model is None:
         model = learn_colour_model([image_rgb], colour, settings)
     if settings.model and model is not None:
         _, raw = _model_mask(image_rgb, model, settings, colour.select(hsv))
     else:
         raw = colour.select(hsv)
-    raw = _opened(raw).view(np.uint8)
+    raw = opened(raw).view(np.uint8)
     # a rough width at half size (enough to size the clean-up) costs a quarter of a full one
     half = cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2),
                       interpolation=cv2.INTER_AREA) > 0
