@@ -29,7 +29,7 @@ from scipy.ndimage import gaussian_filter
 from .colour_range import ColourRange, hsv_image
 from .errors import ReconstructionError
 
-__all__ = ["ColourModel", "find_cable", "find_cable_colour", "thin_pieces", "thickest",
+__all__ = ["ColourModel", "find_cable", "find_cable_colour", "range_of", "thin_pieces", "thickest",
            "colour_candidates",
            "CableCandidate", "opened"]
 
@@ -281,11 +281,19 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3):
                    for members, value in ranked]
 
 
-def _range_of(hsv_pixels):
-    """An HSV box around a candidate's pixels, generous towards the shade: the hue's 1st to
+def range_of(hsv_pixels, *, shade=0.5):
+    """An HSV box around a cable's pixels, generous towards the shade: the hue's 1st to
     99th percentiles (circular) widened by 4, saturation from 0.7 times its 2nd percentile,
-    value from half its 1st percentile (a colourless cable: value from its 1st to 99.5th
-    percentile, any hue)."""
+    value from ``shade`` times its 1st percentile (a colourless cable: value from its 1st to
+    99.5th percentile, any hue).
+
+    Parameters
+    ----------
+    hsv_pixels : ndarray, shape (N, 3)
+        OpenCV HSV values.
+    shade : float, optional
+        Below 1 for pixels that may miss the cable's shade side (a candidate's clusters).
+    """
     h, s, v = (hsv_pixels[:, k].astype(float) for k in range(3))
     v_low, v_high = np.percentile(v, [1.0, 99.5])
     s_low, s_high = np.percentile(s, [2.0, 99.5])
@@ -296,7 +304,7 @@ def _range_of(hsv_pixels):
     offset = (h - centre + 90.0) % 180.0 - 90.0
     low, high = np.percentile(offset, [1.0, 99.0])
     low, high = int(math.floor(centre + low - 4)) % 180, int(math.ceil(centre + high + 4)) % 180
-    return ColourRange((low, int(0.7 * s_low), int(0.5 * v_low)), (high, 255, 255))
+    return ColourRange((low, int(0.7 * s_low), int(shade * v_low)), (high, 255, 255))
 
 
 def find_cable(images_rgb):
@@ -336,7 +344,7 @@ def find_cable(images_rgb):
             totals[index] += _score(opened(np.isin(labels, candidate.members)), other_lab,
                                     diagonal)
     best = candidates[int(np.argmax(totals))]
-    return _range_of(hsv_image(small)[best.mask]), best
+    return range_of(hsv_image(small)[best.mask]), best
 
 
 def find_cable_colour(images_rgb):

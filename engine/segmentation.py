@@ -24,10 +24,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .colour_model import (ColourModel, find_cable, find_cable_colour, opened, thickest,
-                           thin_pieces)
+from .colour_model import ColourModel, find_cable, opened, range_of, thickest, thin_pieces
 from .colour_range import ColourRange, hsv_image
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
+
+#: Pixels darker than this (sum of R, G, B) have no reliable chromaticity.
+_CHROMA_FLOOR = 60
 
 #: :func:`refine_edges` takes the cable's and the background's colours from every this many
 #: of their pixels.
@@ -95,6 +97,15 @@ class SegmentationSettings:
         Pieces of the mask less elongated than ``blob_elongation`` (length over width,
         :func:`thin_pieces`) that hold a disc of radius ``blob_thickness`` cable widths (no
         crossing does) are objects of the cable's colour, not cable.
+    shade_chroma : float
+        Beside sure pixels, pixels of their chromaticity (nearer it than this share of its
+        distance from the surroundings' chromaticity) and darker than the surroundings are
+        the cable's shade side (:func:`_shade_side`); 0 turns this off.
+    seed_shade_reach, seed_shade_chroma : float
+        The model's cable pixels (:func:`colour_seed`) take in the pixels within
+        ``seed_shade_reach`` cable widths of them whose chromaticity is within
+        ``seed_shade_chroma`` of theirs: the shade side, which a found colour's clusters
+        miss (shading darkens a colour, it keeps its chromaticity).
     """
 
     speck_area: float = 3.0
@@ -117,6 +128,9 @@ class SegmentationSettings:
     range_share: float = 3.0
     blob_elongation: float = 10.0
     blob_thickness: float = 1.0
+    shade_chroma: float = 0.4
+    seed_shade_reach: float = 0.8
+    seed_shade_chroma: float = 0.03
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,13 +151,13 @@ def _hue_peak(hues, weights=None):
 
 
 def auto_colour(image_rgb):
-    """The cable colour of one frame, found automatically (:func:`find_cable_colour`).
+    """The cable colour of one frame, found automatically (:func:`sequence_colour`).
 
     Returns
     -------
     ColourRange
     """
-    return find_cable_colour([image_rgb])
+    return sequence_colour([image_rgb], settings=SegmentationSettings(model=False))[0]
 
 
 def reference_frames(count, reference, number):
@@ -172,11 +186,15 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
         None when ``settings.model`` is off or the range has no thin piece in the frames.
     """
     frames = list(frames)
-    seed_colour = colour
-    if colour is None:
-        colour, seed_colour = find_cable(frames)
-    model = learn_colour_model(frames, seed_colour, settings) if settings.model else None
-    return colour, model
+    if colour is not None:
+        return colour, learn_colour_model(frames, colour, settings) if settings.model else None
+    colour, candidate = find_cable(frames)
+    seeds = [colour_seed(frame, candidate, settings) for frame in frames]
+    # the range around the seeds, which hold the shade side the candidate's clusters miss
+    pixels = np.concatenate([hsv_image(frame)[seed] for frame, (seed, _, _) in zip(frames, seeds)])
+    if len(pixels):
+        colour = range_of(pixels, shade=1.0)
+    return colour, _model_of(frames, seeds, settings) if settings.model else None
 
 
 def colour_at(image_rgb, x, y, *, radius=3):
@@ -258,14 +276,16 @@ def _cable_box(mask, margin):
                  max(cols[0] - margin, 0):cols[-1] + margin + 1]
 
 
-def colour_seed(image_rgb, colour):
+def colour_seed(image_rgb, colour, settings=SegmentationSettings()):
     """The cable's sure pixels in a frame: the thin pieces of a colour range's (or a found
-    candidate's) pixels; the pieces shaped like objects; the cable's width.
+    candidate's) pixels with their shade side (:func:`_with_shade`); the pieces shaped like
+    objects; the cable's width.
 
     Parameters
     ----------
     image_rgb : ndarray
     colour : ColourRange or CableCandidate
+    settings : SegmentationSettings, optional
 
     Returns
     -------
@@ -277,7 +297,29 @@ def colour_seed(image_rgb, colour):
     width = cable_width(seed)
     objects = ~thin & (half_width > 0.5 * width) & (area > 4 * width * width)
     objects[0] = False
-    return seed, objects[labels], width
+    objects = objects[labels]
+    if seed.any() and settings.seed_shade_reach > 0:
+        seed = _with_shade(image_rgb, seed, objects, width, settings)
+    return seed, objects, width
+
+
+def _with_shade(image_rgb, seed, objects, width, settings):
+    """``seed`` and the pixels within ``seed_shade_reach`` widths of it of its chromaticity
+    (within ``seed_shade_chroma``), neither too dark to have one nor in ``objects``; the seed
+    alone when its chromaticity is its surroundings' (a colourless cable)."""
+    reach = max(int(round(settings.seed_shade_reach * width)), 1)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+    near = cv2.dilate(seed.view(np.uint8), kernel) > 0
+    around = (cv2.dilate(near.view(np.uint8), kernel) > 0) & ~near
+    chroma = _chroma(image_rgb)
+    inside = np.median(chroma[seed], axis=0)
+    if not around.any() or \
+            np.linalg.norm(inside - np.median(chroma[around], axis=0)) < 2 * settings.seed_shade_chroma:
+        return seed
+    ring = near & ~seed & ~objects
+    close = np.linalg.norm(chroma - inside, axis=-1) < settings.seed_shade_chroma
+    lit = image_rgb.sum(axis=-1, dtype=np.int32) >= _CHROMA_FLOOR
+    return seed | (ring & close & lit)
 
 
 def learn_colour_model(images_rgb, colour, settings=SegmentationSettings()):
@@ -296,7 +338,12 @@ def learn_colour_model(images_rgb, colour, settings=SegmentationSettings()):
         as it is).
     """
     images_rgb = list(images_rgb)
-    seeds = [colour_seed(image, colour) for image in images_rgb]
+    return _model_of(images_rgb, [colour_seed(image, colour, settings) for image in images_rgb],
+                     settings)
+
+
+def _model_of(images_rgb, seeds, settings):
+    """:func:`learn_colour_model` from the frames' :func:`colour_seed` results."""
     if not any(seed.any() for seed, _, _ in seeds):
         return None
     try:
@@ -314,7 +361,8 @@ def _model_mask(image_rgb, model, settings, in_range=None):
     colour range (a cable's shade side, or a strand darkened where another passes over it,
     is a colour the background has too, but not right beside the cable). The range counts
     only when it holds at most ``range_share`` times the sure pixels (a range around a
-    striped cable holds the whole frame)."""
+    striped cable holds the whole frame). The shade side beside sure pixels is likely too
+    (:func:`_shade_side`)."""
     probability = cv2.GaussianBlur(model.probability(image_rgb), (3, 3), 0)
     sure = probability >= 255.0 * settings.probability
     if not settings.probability_near < settings.probability:
@@ -328,7 +376,39 @@ def _model_mask(image_rgb, model, settings, in_range=None):
     likely = probability >= 255.0 * settings.probability_near
     if in_range is not None and in_range.sum() <= settings.range_share * sure.sum():
         likely |= in_range
-    return sure, sure | (near & likely)
+    likely = near & likely
+    if settings.shade_chroma > 0 and sure.any():
+        likely |= _shade_side(image_rgb, sure, near, settings)
+    return sure, sure | likely
+
+
+def _shade_side(image_rgb, sure, near, settings):
+    """The pixels of ``near`` (beside the ``sure`` ones) that are the cable's shade side:
+    of the sure pixels' chromaticity (nearer it than ``shade_chroma`` times its distance
+    from the surroundings' chromaticity; shading keeps a colour's chromaticity), and darker
+    than the surroundings (a brighter pixel of that chromaticity beside a cable is its glow
+    or light it throws on the table). None for a cable of its surroundings' chromaticity."""
+    side = np.zeros_like(sure)
+    box = _cable_box(near, 2)
+    sure, near, image_rgb = sure[box], near[box], image_rgb[box]
+    around = (cv2.dilate(near.view(np.uint8), np.ones((5, 5), np.uint8)) > 0) & ~near
+    if not around.any():
+        return side
+    # the colours of every other row and column (a quarter of the pixels) are plenty
+    sample = image_rgb[::2, ::2]
+    inside = np.median(_chroma(sample[sure[::2, ::2]]), axis=0)
+    surroundings = sample[around[::2, ::2]]
+    gap = np.linalg.norm(inside - np.median(_chroma(surroundings), axis=0))
+    if gap < 2.0 * settings.seed_shade_chroma:
+        return side
+    rows, cols = np.nonzero(near & ~sure)
+    pixels = image_rgb[rows, cols]
+    brightness = pixels.sum(axis=-1, dtype=np.int32)
+    shade = (np.linalg.norm(_chroma(pixels) - inside, axis=-1) < settings.shade_chroma * gap) \
+        & (brightness >= _CHROMA_FLOOR) \
+        & (brightness < np.median(surroundings.sum(axis=-1, dtype=np.int32)))
+    side[box][rows[shade], cols[shade]] = True
+    return side
 
 
 def _drop_blobs(mask, width, settings):
