@@ -51,10 +51,11 @@ class SegmentationSettings:
         Connected pieces smaller than ``speck_area * width**2`` pixels are removed.
     fill_highlights : bool
         Fill the desaturated specular streak along a glossy cable.
-    shade_value : float
-        Edge correction on the shadow side: a mask pixel on the edge leaves it when it is darker than
-        ``shade_value`` times the cable's median value and less saturated than its median
-        (light bounced off the cable tints its shadow with the cable's hue).
+    shade_value, shade_saturation : float
+        Edge correction on the shadow side: a mask pixel on the edge leaves it when it is darker
+        than ``shade_value`` times the cable's median value and less saturated than
+        ``shade_saturation`` times its median (light bounced off the cable tints its shadow
+        with the cable's hue, paler; the cable's own shade side keeps its saturation).
     junction_radius : float
         Radius of the counting disc.
     junction_ratio : float
@@ -97,10 +98,11 @@ class SegmentationSettings:
         Pieces of the mask less elongated than ``blob_elongation`` (length over width,
         :func:`thin_pieces`) that hold a disc of radius ``blob_thickness`` cable widths (no
         crossing does) are objects of the cable's colour, not cable.
-    shade_chroma : float
-        Beside sure pixels, pixels of their chromaticity (nearer it than this share of its
-        distance from the surroundings' chromaticity) and darker than the surroundings are
-        the cable's shade side (:func:`_shade_side`); 0 turns this off.
+    shade_chroma, shade_reach : float
+        Within ``shade_reach`` cable widths of sure pixels, pixels of their chromaticity
+        (nearer it than ``shade_chroma`` times its distance from the surroundings'
+        chromaticity) and darker than the surroundings are the cable's shade side
+        (:func:`_shade_side`); ``shade_chroma`` 0 turns this off.
     seed_shade_reach, seed_shade_chroma : float
         The model's cable pixels (:func:`colour_seed`) take in the pixels within
         ``seed_shade_reach`` cable widths of them whose chromaticity is within
@@ -111,6 +113,7 @@ class SegmentationSettings:
     speck_area: float = 3.0
     fill_highlights: bool = True
     shade_value: float = 0.5
+    shade_saturation: float = 0.9
     junction_radius: float = 1.5
     junction_ratio: float = 1.33
     junction_disc: float = 1.0
@@ -129,6 +132,7 @@ class SegmentationSettings:
     blob_elongation: float = 10.0
     blob_thickness: float = 1.0
     shade_chroma: float = 0.4
+    shade_reach: float = 0.75
     seed_shade_reach: float = 0.8
     seed_shade_chroma: float = 0.03
 
@@ -307,10 +311,9 @@ def _with_shade(image_rgb, seed, objects, width, settings):
     """``seed`` and the pixels within ``seed_shade_reach`` widths of it of its chromaticity
     (within ``seed_shade_chroma``), neither too dark to have one nor in ``objects``; the seed
     alone when its chromaticity is its surroundings' (a colourless cable)."""
-    reach = max(int(round(settings.seed_shade_reach * width)), 1)
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
-    near = cv2.dilate(seed.view(np.uint8), kernel) > 0
-    around = (cv2.dilate(near.view(np.uint8), kernel) > 0) & ~near
+    reach = settings.seed_shade_reach * width
+    near = _within(seed, reach)
+    around = _within(near, reach) & ~near
     chroma = _chroma(image_rgb)
     inside = np.median(chroma[seed], axis=0)
     if not around.any() or \
@@ -369,17 +372,24 @@ def _model_mask(image_rgb, model, settings, in_range=None):
         return sure, sure
     small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
                        interpolation=cv2.INTER_AREA) > 0
-    # the half-size width is half the full-size width: reach = near_reach widths, full size
-    reach = max(int(round(2.0 * settings.near_reach * cable_width(opened(small)))), 1)
-    near = cv2.dilate(sure.view(np.uint8), cv2.getStructuringElement(
-        cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
+    # the half-size width is half the full-size width
+    width = 2.0 * cable_width(opened(small))
+    near = _within(sure, settings.near_reach * width)
     likely = probability >= 255.0 * settings.probability_near
     if in_range is not None and in_range.sum() <= settings.range_share * sure.sum():
         likely |= in_range
     likely = near & likely
     if settings.shade_chroma > 0 and sure.any():
-        likely |= _shade_side(image_rgb, sure, near, settings)
+        likely |= _shade_side(image_rgb, sure, _within(sure, settings.shade_reach * width),
+                              settings)
     return sure, sure | likely
+
+
+def _within(mask, distance):
+    """The pixels within ``distance`` pixels (at least 1) of ``mask``'s (a disc dilation)."""
+    reach = max(int(round(distance)), 1)
+    return cv2.dilate(mask.view(np.uint8), cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
 
 
 def _shade_side(image_rgb, sure, near, settings):
@@ -402,7 +412,7 @@ def _shade_side(image_rgb, sure, near, settings):
     if gap < 2.0 * settings.seed_shade_chroma:
         return side
     rows, cols = np.nonzero(near & ~sure)
-    pixels = image_rgb[rows, cols]
+    pixels = cv2.blur(image_rgb, (3, 3))[rows, cols]  # a dark pixel's chromaticity is noisy
     brightness = pixels.sum(axis=-1, dtype=np.int32)
     shade = (np.linalg.norm(_chroma(pixels) - inside, axis=-1) < settings.shade_chroma * gap) \
         & (brightness >= _CHROMA_FLOOR) \
@@ -503,7 +513,8 @@ def _correct_edges(mask, hsv, settings):
     edge = mask & ~(cv2.erode(mask.view(np.uint8), np.ones((3, 3), np.uint8)) > 0)
     rows, cols = np.nonzero(edge)
     saturation, value = hsv[rows, cols, 1], hsv[rows, cols, 2]
-    shade = (value < settings.shade_value * median_value) & (saturation < median_saturation)
+    shade = (value < settings.shade_value * median_value) \
+        & (saturation < settings.shade_saturation * median_saturation)
     corrected = mask.copy()
     corrected[rows[shade], cols[shade]] = False
     return corrected

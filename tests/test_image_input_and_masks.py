@@ -124,18 +124,18 @@ def test_masks_of_a_scene_are_not_shifted(scene):
         growth = [(cable_mask(image, colour, settings)[0].sum() - truth.sum()) / truth.sum()
                   for image, truth in zip(scene.images, scene.masks)]
         measured[reach] = (np.mean(np.abs(shifts)), np.mean(growth))
-    assert measured[0][0] > 0.15  # pixels, unrefined
+    assert measured[0][0] > 0.12  # pixels, unrefined (0.14 here)
     # the default (the colour model, refined) is no more shifted than the refined range
     default = [centre_shift(cable_mask(image, auto_colour(scene.images[0]))[0], truth)[0]
                for image, truth in zip(scene.images, scene.masks)]
-    assert np.nanmean(np.abs(default)) < 0.2
+    assert np.nanmean(np.abs(default)) < 0.15  # 0.10 here
     # the shadow-side clean-up runs after the refinement (a contact shadow tinted by light
     # bounced off the cable is not cable), which gives back part of the shade side: the
-    # shift falls by about 30% on this scene
+    # shift falls by about 30% on this scene (0.14 to 0.10 px)
     assert measured[2][0] < 0.8 * measured[0][0]
-    # and the area stays close (the clean-up trims the shade side a little: -7% here, -5%
-    # unrefined; end to end the centre matters more than the width)
-    assert abs(measured[2][1]) < 0.08
+    # and the area stays close (the clean-up trims the shade side a little: -3.5% here,
+    # -1% unrefined; end to end the centre matters more than the width)
+    assert abs(measured[2][1]) < 0.06
 
 
 def test_refined_edges_land_on_a_blurred_edge_with_shading():
