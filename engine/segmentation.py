@@ -31,6 +31,9 @@ from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 #: Pixels darker than this (sum of R, G, B) have no reliable chromaticity.
 _CHROMA_FLOOR = 60
 
+#: :func:`_shade_side` compares the shade side with the pixels up to this many pixels beyond it.
+_AROUND = 2.5
+
 #: :func:`refine_edges` takes the cable's and the background's colours from every this many
 #: of their pixels.
 _EDGE_SAMPLE = 7
@@ -374,51 +377,65 @@ def _model_mask(image_rgb, model, settings, in_range=None):
                        interpolation=cv2.INTER_AREA) > 0
     # the half-size width is half the full-size width
     width = 2.0 * cable_width(opened(small))
-    near = _within(sure, settings.near_reach * width)
-    likely = probability >= 255.0 * settings.probability_near
+    near_reach = max(settings.near_reach * width, 1.0)
+    shade_reach = max(settings.shade_reach * width, 1.0) if settings.shade_chroma > 0 else 0.0
+    # the rest happens on the box of the sure pixels grown by the reaches
+    box = _cable_box(sure, int(math.ceil(max(near_reach, shade_reach) + _AROUND)) + 1)
+    if box is None:
+        return sure, sure
+    distance = cv2.distanceTransform(np.ascontiguousarray(~sure[box]).view(np.uint8),
+                                     cv2.DIST_L2, cv2.DIST_MASK_5)
+    likely = probability[box] >= 255.0 * settings.probability_near
     if in_range is not None and in_range.sum() <= settings.range_share * sure.sum():
-        likely |= in_range
-    likely = near & likely
-    if settings.shade_chroma > 0 and sure.any():
-        likely |= _shade_side(image_rgb, sure, _within(sure, settings.shade_reach * width),
-                              settings)
-    return sure, sure | likely
+        likely |= in_range[box]
+    likely &= distance <= near_reach
+    if shade_reach > 0:
+        likely |= _shade_side(image_rgb[box], sure[box], distance, shade_reach, settings)
+    mask = sure.copy()
+    mask[box] |= likely
+    return sure, mask
 
 
-def _within(mask, distance):
-    """The pixels within ``distance`` pixels (at least 1) of ``mask``'s (a disc dilation)."""
-    reach = max(int(round(distance)), 1)
-    return cv2.dilate(mask.view(np.uint8), cv2.getStructuringElement(
-        cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
-
-
-def _shade_side(image_rgb, sure, near, settings):
-    """The pixels of ``near`` (beside the ``sure`` ones) that are the cable's shade side:
-    of the sure pixels' chromaticity (nearer it than ``shade_chroma`` times its distance
-    from the surroundings' chromaticity; shading keeps a colour's chromaticity), and darker
-    than the surroundings (a brighter pixel of that chromaticity beside a cable is its glow
-    or light it throws on the table). None for a cable of its surroundings' chromaticity."""
+def _shade_side(image_rgb, sure, distance, reach, settings):
+    """The pixels within ``reach`` of the ``sure`` ones (``distance`` from them) that are the
+    cable's shade side: of the sure pixels' chromaticity (nearer it than ``shade_chroma``
+    times its distance from the surroundings' chromaticity; shading keeps a colour's
+    chromaticity), and darker than the surroundings (the pixels up to :data:`_AROUND` pixels
+    farther; a brighter pixel of that chromaticity beside a cable is its glow or light it
+    throws on the table). None for a cable of its surroundings' chromaticity."""
     side = np.zeros_like(sure)
-    box = _cable_box(near, 2)
-    sure, near, image_rgb = sure[box], near[box], image_rgb[box]
-    around = (cv2.dilate(near.view(np.uint8), np.ones((5, 5), np.uint8)) > 0) & ~near
+    around = (distance > reach) & (distance <= reach + _AROUND)
     if not around.any():
         return side
-    # the colours of every other row and column (a quarter of the pixels) are plenty
-    sample = image_rgb[::2, ::2]
-    inside = np.median(_chroma(sample[sure[::2, ::2]]), axis=0)
-    surroundings = sample[around[::2, ::2]]
+    # the colours of every third row and column are plenty
+    sample = image_rgb[::3, ::3]
+    inside = np.median(_chroma(sample[sure[::3, ::3]]), axis=0)
+    surroundings = sample[around[::3, ::3]]
     gap = np.linalg.norm(inside - np.median(_chroma(surroundings), axis=0))
     if gap < 2.0 * settings.seed_shade_chroma:
         return side
-    rows, cols = np.nonzero(near & ~sure)
+    rows, cols = np.nonzero((distance <= reach) & ~sure)
     pixels = cv2.blur(image_rgb, (3, 3))[rows, cols]  # a dark pixel's chromaticity is noisy
     brightness = pixels.sum(axis=-1, dtype=np.int32)
-    shade = (np.linalg.norm(_chroma(pixels) - inside, axis=-1) < settings.shade_chroma * gap) \
+    offset = _chroma(pixels) - inside
+    shade = (np.einsum("ij,ij->i", offset, offset) < (settings.shade_chroma * gap) ** 2) \
         & (brightness >= _CHROMA_FLOOR) \
         & (brightness < np.median(surroundings.sum(axis=-1, dtype=np.int32)))
-    side[box][rows[shade], cols[shade]] = True
+    side[rows[shade], cols[shade]] = True
     return side
+
+
+def _within(mask, distance):
+    """The pixels within ``distance`` pixels (at least 1) of ``mask``'s (a disc dilation, on
+    the mask's box only: a large disc is slow over a whole frame)."""
+    reach = max(int(round(distance)), 1)
+    grown = np.zeros_like(mask)
+    box = _cable_box(mask, reach)
+    if box is not None:
+        grown[box] = cv2.dilate(np.ascontiguousarray(mask[box]).view(np.uint8),
+                                cv2.getStructuringElement(
+                                    cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) > 0
+    return grown
 
 
 def _drop_blobs(mask, width, settings):
