@@ -17,7 +17,11 @@ of the region).
 
 Nothing here depends on the image count or size for memory: masks are read one view at a time
 (arrays or callables that load them), kept bit-packed between levels, and only the voxels of
-the current level are held.
+the current level are held. The voxels follow the masks, though: masks that take in much of
+the table, or too few views to bound the cable, make billions of them. Before each split and
+before the grid is built, the voxels' memory (and what the stages after carving build on
+them) is checked against a budget (``memory_mb``), and the carve stops with a clear error
+rather than run the machine out of memory.
 
 The region comes from the data: the cameras' common look-at point and what they see around it
 at that distance, carved at the coarsest level with the cable's own masks. The fine voxel size
@@ -34,6 +38,7 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from .errors import ReconstructionError
 from .progress import StageProgress, check_cancel
 from .segmentation import cable_width
 from .upright import look_at_point
@@ -47,6 +52,11 @@ _CHILDREN = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
 #: Voxels projected per batch (bounds the memory of one view's projection; batches are shared
 #: out to the threads).
 _BATCH = 1 << 17
+#: Bytes a voxel of a level costs while it is voted on (its index, lattice and votes).
+_LEVEL_BYTES = 80
+#: Bytes the carved grid and the stages after it (the segment graph's neighbour tables, the
+#: rod fit's voxel points) cost per occupied voxel, and per voxel of the grid's box.
+_OCCUPIED_BYTES, _BOX_BYTES = 256, 12
 
 
 @dataclass(frozen=True)
@@ -82,6 +92,11 @@ class CarvingSettings:
     cache_mb : float
         The views' distance maps (2 bytes a pixel) are kept between levels when they fit in
         this many megabytes, and recomputed at each level when not.
+    memory_mb : float
+        The voxels (while carved, and the grid and what the stages after it build on it) may
+        take this many megabytes: a carve that would need more stops with a
+        :class:`.ReconstructionError` before it allocates them (masks that take in far more
+        than a cable, or too few views to bound it).
     """
 
     voxels_per_radius: float = 3.0
@@ -94,6 +109,7 @@ class CarvingSettings:
     coarse_to_fine: bool = True
     threads: int = 0
     cache_mb: float = 256.0
+    memory_mb: float = 2048.0
 
     def __post_init__(self):
         if not (0.0 < self.vote <= 1.0 and 0.0 < self.core_agreement <= 1.0):
@@ -423,11 +439,27 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
             kept, counted, hits, junction = carver.level(index, size, fine=level == 0)
             index = index[kept]
             if level > 0:
+                _check_memory(8 * len(index) * _LEVEL_BYTES, settings,
+                              f"{8 * len(index):,} voxels of {size / 2:.3g} at level {level - 1}")
                 index = (2 * index[:, None, :] + _CHILDREN[None]).reshape(-1, 3)
     large = _large_pieces(index, fine, settings.min_piece_length * radius)
+    index = index[large]
+    if len(index):
+        box = np.prod(index.max(axis=0) - index.min(axis=0) + 3, dtype=np.float64)
+        _check_memory(len(index) * _OCCUPIED_BYTES + box * _BOX_BYTES, settings,
+                      f"{len(index):,} occupied voxels in a box of {box:,.0f}")
     stage(1.0, "carved")
-    return _dense_grid(index[large], junction[large], counted[large], hits[large], lower, fine,
-                       radius)
+    return _dense_grid(index, junction[large], counted[large], hits[large], lower, fine, radius)
+
+
+def _check_memory(needed, settings, what):
+    """A :class:`.ReconstructionError` when ``needed`` bytes exceed the budget."""
+    budget = settings.memory_mb * 2 ** 20
+    if needed > budget:
+        raise ReconstructionError(
+            f"carving would need {needed / 2 ** 30:.1f} GB for {what}, over its budget of "
+            f"{budget / 2 ** 30:.1f} GB: the masks take in far more than a thin cable (check "
+            f"them: segment writes them), or the views are too few to bound it")
 
 
 def _large_pieces(index, size, min_length):

@@ -117,3 +117,24 @@ def test_bad_input_and_cancel(scene):
     with pytest.raises(Cancelled):
         carve(scene.cameras, scene.masks, progress=progress, cancel=cancel)
     assert calls and max(calls) < 0.6
+
+
+def test_masks_that_take_in_everything_stop_at_the_memory_budget(scene):
+    """Masks of the whole frame occupy the whole region: the carve stops with a clear error
+    before it allocates more than its budget (it used to run the machine out of memory)."""
+    import resource
+
+    from engine.errors import ReconstructionError
+
+    scene, _ = scene
+    everything = [np.ones_like(mask) for mask in scene.masks]
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(ReconstructionError, match=r"carving would need .* GB .* budget of 0\.2 GB"):
+        carve(scene.cameras, everything, radius=scene.truth.radius,
+              settings=CarvingSettings(memory_mb=200))
+    grown = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024  # MB
+    assert grown < 400
+    # the cable's own masks fit well within that budget
+    grid = carve(scene.cameras, scene.masks, radius=scene.truth.radius,
+                 settings=CarvingSettings(memory_mb=200))
+    assert grid.occupied.any()
