@@ -38,6 +38,8 @@ def build_parser():
     rebuild.add_argument("--no-cameras", action="store_true",
                          help="leave the cameras out of the .blend")
     rebuild.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    rebuild.add_argument("--debug", action="store_true",
+                         help="an internal error shows its traceback (and is not caught)")
     add_settings_arguments(rebuild, BezierSettings)
     return parser
 
@@ -62,7 +64,7 @@ def _reconstruct(args):
     obj = apply_outcome(bpy.context, request, outcome)
     bpy.ops.wm.save_as_mainfile(filepath=str(output), check_existing=False, copy=True)
     result = outcome.state.result
-    for warning in result.warnings:
+    for warning in outcome.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"{obj.name}: {len(result.paths)} path(s), {len(result.crossings)} crossing(s), "
           f"{outcome.report['control_points']} control points -> {output}", file=sys.stderr)
@@ -75,4 +77,4 @@ def handle_command(argv):
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # argparse printed the usage and the reason
         return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
-    return run_with_exit_code(_reconstruct, args)
+    return run_with_exit_code(_reconstruct, args, debug=args.debug)

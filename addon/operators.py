@@ -121,8 +121,8 @@ def _summary(obj, outcome):
     text = (f"{obj.name}: {len(result.paths)} path(s), {len(result.crossings)} crossing(s), "
             f"{outcome.report['control_points']} control points (within "
             f"{outcome.report['max_error']:.3f} r)")
-    if result.warnings:
-        text += f"; {len(result.warnings)} warning(s): {result.warnings[0]}"
+    if outcome.warnings:
+        text += f"; {len(outcome.warnings)} warning(s): {outcome.warnings[0]}"
     return text
 
 

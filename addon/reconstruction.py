@@ -111,6 +111,11 @@ class Outcome:
     curves: list
     report: dict
 
+    @property
+    def warnings(self):
+        """The reconstruction's warnings, then the curve fit's."""
+        return list(self.state.result.warnings) + list(self.report.get("warnings", ()))
+
 
 def _absolute(path):
     return str(Path(bpy.path.abspath(path)).resolve()) if path else None
@@ -271,4 +276,4 @@ def _remember(obj, request, outcome):
         item.under_path, item.under_index = crossing.under.path, crossing.under.index
         item.confidence = crossing.confidence
         item.position = crossing.position.tolist()
-    obj["cable_recon_warnings"] = list(result.warnings)
+    obj["cable_recon_warnings"] = outcome.warnings

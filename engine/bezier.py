@@ -364,7 +364,8 @@ def fit_result_curves(result, *, settings=BezierSettings()):
     report : dict
         ``control_points`` (knots over all curves), ``max_error`` (largest distance to the
         reconstruction, in r), ``crossing_gaps`` (least strand distance per crossing, in r,
-        curve and reconstruction).
+        curve and reconstruction), ``warnings`` (crossings whose strands the curve could not
+        keep ``crossing_gap`` radii apart within the tolerance).
     """
     r = result.radius
     tolerance = settings.tolerance * r
@@ -386,9 +387,14 @@ def fit_result_curves(result, *, settings=BezierSettings()):
         there = distance_to_polyline(dense, path.points, closed=path.closed).max()
         back = distance_to_polyline(path.points, dense, closed=path.closed).max()
         errors.append(max(there, back) / r)
+    warnings = [f"the curve's strands at crossing {number + 1} are {gap / r:.2f} r apart, "
+                f"less than {settings.crossing_gap:g} r: they may touch"
+                for number, gap in enumerate(curve_gaps)
+                if gap < settings.crossing_gap * r - 1e-9]
     report = {"control_points": int(sum(len(c.knots) for c in curves)),
               "max_error": float(max(errors)),
-              "crossing_gaps": [(float(c) / r, g / r) for c, g in zip(curve_gaps, gaps)]}
+              "crossing_gaps": [(float(c) / r, g / r) for c, g in zip(curve_gaps, gaps)],
+              "warnings": warnings}
     return curves, report
 
 

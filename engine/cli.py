@@ -1,11 +1,16 @@
 """The ``python -m engine`` command line.
 
-Exit codes: 0 success, 2 bad input (one-line reason on stderr), 3 reconstruction failed.
+Exit codes: 0 success, 2 bad input (one-line reason on stderr), 3 reconstruction failed,
+4 an internal error (a bug: one line naming where, the traceback in a file), 130 cancelled.
 """
 
 import argparse
 import logging
+import os
 import sys
+import tempfile
+import traceback
+from pathlib import Path
 
 from . import __version__
 from .errors import Cancelled, InputError, ReconstructionError
@@ -14,7 +19,7 @@ from .settings_cli import add_settings_arguments, settings_from_arguments
 __all__ = ["main", "build_parser", "add_reconstruct_arguments", "reconstruct_arguments",
            "run_with_exit_code", "ProgressBar"]
 
-EXIT_OK, EXIT_BAD_INPUT, EXIT_FAILED = 0, 2, 3
+EXIT_OK, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_BUG = 0, 2, 3, 4
 log = logging.getLogger(__name__)
 
 
@@ -204,6 +209,8 @@ def build_parser():
     )
     parser.add_argument("--version", action="version", version=f"cable_recon {__version__}")
     parser.add_argument("-q", "--quiet", action="store_true", help="only print errors")
+    parser.add_argument("--debug", action="store_true",
+                        help="an internal error shows its traceback (and is not caught)")
     # -q also after the command (a subcommand's default must not undo a -q given before it).
     quiet = argparse.ArgumentParser(add_help=False)
     quiet.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
@@ -282,19 +289,20 @@ def main(argv=None):
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT
     try:
-        return run_with_exit_code(args.run, args)
+        return run_with_exit_code(args.run, args, debug=args.debug)
     finally:
         package_log.removeHandler(handler)
 
 
-def run_with_exit_code(run, *args, stream=None):
+def run_with_exit_code(run, *args, stream=None, debug=False):
     """Call ``run(*args)``; the exit code, with a one-line reason on ``stream`` on failure.
 
-    0 success (or what ``run`` returns), 2 bad input, 3 reconstruction failed, 130 cancelled.
+    0 success (or what ``run`` returns), 2 bad input, 3 reconstruction failed, 4 an internal
+    error (a bug; re-raised when ``debug``), 130 cancelled.
     """
     stream = stream or sys.stderr
     try:
-        return run(*args) or EXIT_OK
+        return _run_naming_bugs(run, args, stream, debug)
     except InputError as error:
         print(f"error: {error}", file=stream)
         return EXIT_BAD_INPUT
@@ -307,3 +315,41 @@ def run_with_exit_code(run, *args, stream=None):
     except (Cancelled, KeyboardInterrupt):
         print("cancelled", file=stream)
         return 130
+
+
+def _run_naming_bugs(run, args, stream, debug):
+    """``run(*args)``; an unexpected exception (a bug) is one line naming the engine module,
+    function and line it came from and the file its traceback went to, and exit code 4."""
+    try:
+        return run(*args) or EXIT_OK
+    except (InputError, ReconstructionError, FileExistsError, Cancelled, KeyboardInterrupt):
+        raise
+    except Exception as error:
+        if debug:
+            raise
+        where = _where(error)
+        path = Path(tempfile.gettempdir()) / f"cable_recon-traceback-{os.getpid()}.txt"
+        try:
+            path.write_text("".join(traceback.format_exception(error)))
+            kept = f"the traceback is in {path}"
+        except OSError:
+            kept = "run with --debug to see the traceback"
+        print(f"internal error (a bug, please report it) in {where}: "
+              f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''} "
+              f"({kept})", file=stream)
+        return EXIT_BUG
+
+
+def _where(error):
+    """``module.function:line`` of the deepest frame of the engine (or the add-on) in the
+    traceback, else of the deepest frame."""
+    frames = traceback.extract_tb(error.__traceback__)
+    package = Path(__file__).resolve().parents[1]
+    ours = [frame for frame in frames if Path(frame.filename).resolve().is_relative_to(package)]
+    frame = (ours or frames)[-1]
+    try:
+        module = Path(frame.filename).resolve().relative_to(package).with_suffix("")
+        name = ".".join(module.parts)
+    except ValueError:
+        name = Path(frame.filename).stem
+    return f"{name}.{frame.name}:{frame.lineno}"

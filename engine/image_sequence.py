@@ -1,7 +1,8 @@
 """Image sequences: a folder of frames, or a video sampled to frames, checked before any work.
 
 Every problem a user can have with the input gets a one-line :class:`InputError` naming the
-file: a missing or empty folder, a file that is not an image, frames of different sizes.
+file: a missing or empty folder, a file that is not an image, a truncated JPEG (which the
+decoder would fill with grey and only warn about), frames of different sizes.
 """
 
 import logging
@@ -30,6 +31,34 @@ def read_image(path):
     if data is None:
         raise InputError(f"{path} cannot be read as an image")
     return cv2.cvtColor(data, cv2.COLOR_BGR2RGB)
+
+
+def jpeg_is_complete(data):
+    """Whether JPEG bytes hold their whole image: the end-of-image marker follows the first
+    scan. (The decoder fills a truncated file's missing rows with grey and only warns.)
+
+    The marker segments before the scan are walked by their lengths, so an embedded
+    thumbnail's end marker does not count; within the scan a 0xFF byte is always followed by
+    0x00 or a restart marker, so the first 0xFFD9 there is the image's end. Data after it
+    (a phone's appended video) is allowed.
+    """
+    if data[:2] != b"\xff\xd8":
+        return False
+    position = 2
+    while position + 4 <= len(data):
+        if data[position] != 0xFF:
+            return False
+        marker = data[position + 1]
+        if marker == 0xFF:  # fill byte
+            position += 1
+            continue
+        if marker == 0xD9:  # end of image before any scan
+            return False
+        length = int.from_bytes(data[position + 2:position + 4], "big")
+        if marker == 0xDA:  # start of scan
+            return data.find(b"\xff\xd9", position + 2 + length) >= 0
+        position += 2 + length
+    return False
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,7 +196,12 @@ def open_image_sequence(source, *, video_frames=40, work_dir=None):
 
     size = None
     for path in paths:
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        data = np.fromfile(path, dtype=np.uint8)
+        if path.suffix.lower() in (".jpg", ".jpeg") and data[:2].tobytes() == b"\xff\xd8" \
+                and not jpeg_is_complete(data.tobytes()):
+            raise InputError(f"{path} is truncated or corrupt: its JPEG data ends before the "
+                             "image does")
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
         if image is None:
             raise InputError(f"{path} cannot be read as an image")
         shape = (image.shape[1], image.shape[0])

@@ -604,7 +604,17 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
 
 def _finish(fits, crossings, state, clock):
     warnings = list(state.warnings)
-    radius = measure_radius([fit.points for fit in fits], state.views) or state.carved_radius
+    for number, fit in enumerate(fits):
+        named = f"path {number + 1}: " if len(fits) > 1 else ""
+        warnings.extend(named + warning for warning in fit.warnings)
+        if not fit.converged:
+            warnings.append(f"{named}the final fit stopped before it converged: the curve may "
+                            "be a little off the cable")
+    radius = measure_radius([fit.points for fit in fits], state.views)
+    if not radius:
+        radius = state.carved_radius
+        warnings.append("the cable's radius could not be measured in the frames: it is the "
+                        "carving's estimate")
     scale = _scale_factor(fits, radius, state.diameter, state.length)
     cameras = [view.camera for view in state.views]
     units = "model"

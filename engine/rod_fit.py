@@ -871,19 +871,38 @@ def _obstacle_pairs(obstacles, input_arc, count, closed, settings):
 
 
 def _contact_pairs(contacts, input_arc, count, closed, settings):
-    """``(over, under)`` vertex pairs of all contacts, on the rod's vertex numbering."""
+    """``(over, under)`` vertex pairs of all contacts, on the rod's vertex numbering, and
+    warnings.
+
+    Two crossings close along the cable (a tight kink) can give a contact whose over and
+    under strands share vertices: the shared ones are left out of both; a contact whose
+    strands' middles lie in each other's (one place of the cable, not a crossing) is dropped.
+    Each is a warning, not a failure.
+    """
     span = int(math.ceil(settings.contact_span / settings.spacing))
-    pairs = []
+    pairs, warnings = [], []
     for contact in contacts:
         try:
             over, under = (_strand_vertices(strand, input_arc, count, closed, span)
                            for strand in (contact.over, contact.under))
         except ValueError as error:
             raise ValueError(f"bad contact {contact}: {error}") from None
-        if np.intersect1d(over, under).size:
-            raise ValueError(f"contact {contact}: the over and under strands overlap")
+        shared = np.intersect1d(over, under)
+        if shared.size:
+            # a strand's middle inside the other strand: one place, not a crossing
+            inside = np.isin(over[len(over) // 2], under) or np.isin(under[len(under) // 2], over)
+            over, under = np.setdiff1d(over, shared), np.setdiff1d(under, shared)
+            if inside or not (over.size and under.size):
+                warnings.append(f"a crossing (points {contact.over} over {contact.under}) "
+                                "was left out of the fit: its strands are too close along "
+                                "the cable to be told apart")
+                continue
+            warnings.append(f"a crossing (points {contact.over} over {contact.under}) holds "
+                            "its strands apart over a shorter length: they are close along "
+                            "the cable")
         pairs.append(np.stack(np.meshgrid(over, under, indexing="ij"), -1).reshape(-1, 2))
-    return np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
+    pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
+    return pairs, warnings
 
 
 # -- the fit -------------------------------------------------------------------------------------
@@ -910,6 +929,8 @@ class RodFit:
     input_arc : ndarray, shape (M,)
         Arc-length position (0..1) of each input point along the rod: input point ``k`` lies
         near vertex ``round(input_arc[k] * edges)``.
+    warnings : tuple of str
+        What the fit had to give up (a contact it could not hold), one sentence each.
     """
 
     points: np.ndarray
@@ -920,6 +941,7 @@ class RodFit:
     iterations: int
     converged: bool
     input_arc: np.ndarray
+    warnings: tuple = ()
 
     def vertex_of(self, index):
         """The fitted vertex nearest to input point ``index``."""
@@ -1022,7 +1044,7 @@ def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), obstacles=(),
     chain = _initial_chain(points, radius, closed, settings)
     input_arc = _arc(points, False)
     input_arc = input_arc / (_arc(points, closed)[-1])
-    pairs = _contact_pairs(tuple(contacts), input_arc, len(chain), closed, settings)
+    pairs, warnings = _contact_pairs(tuple(contacts), input_arc, len(chain), closed, settings)
     obstacle_pairs = _obstacle_pairs(tuple(obstacles), input_arc, len(chain), closed, settings)
     rod_settings = RodSettings(youngs_modulus=_FIT_MODULUS, max_iterations=settings.max_iterations,
                                step_tolerance=settings.step_tolerance, max_step=settings.max_step)
@@ -1048,4 +1070,5 @@ def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), obstacles=(),
     energies = {name: value / unit for name, value in result.energies.items()}
     return RodFit(points=current, radii=radii, closed=bool(closed),
                   energy=float(sum(energies.values())), energies=energies,
-                  iterations=iterations, converged=result.converged, input_arc=input_arc)
+                  iterations=iterations, converged=result.converged, input_arc=input_arc,
+                  warnings=tuple(warnings))

@@ -116,7 +116,7 @@ class SegmentationSettings:
     speck_area: float = 3.0
     fill_highlights: bool = True
     shade_value: float = 0.5
-    shade_saturation: float = 0.9
+    shade_saturation: float = 0.95
     junction_radius: float = 1.5
     junction_ratio: float = 1.33
     junction_disc: float = 1.0

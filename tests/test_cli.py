@@ -25,3 +25,30 @@ def test_no_command_is_a_usage_error():
 def test_unknown_command_is_a_usage_error():
     run = run_engine("frobnicate")
     assert run.returncode == 2 and "invalid choice" in run.stderr
+
+
+def test_a_bug_is_one_line_naming_where_with_the_traceback_in_a_file():
+    import io
+    import re
+    from pathlib import Path
+
+    import numpy as np
+    import pytest
+
+    from engine.carving import carve
+    from engine.cli import EXIT_BUG, run_with_exit_code
+
+    not_a_camera = object()
+    stream = io.StringIO()
+    code = run_with_exit_code(carve, [not_a_camera], [np.zeros((2, 2), bool)], stream=stream)
+    line = stream.getvalue()
+    assert code == EXIT_BUG == 4 and line.count("\n") == 1
+    # the deepest frame of the engine: module, function, line
+    assert re.match(r"internal error \(a bug, please report it\) in engine\.camera\.\S+:\d+: "
+                    r"AttributeError: ", line)
+    traceback_file = Path(re.search(r"the traceback is in (\S+)\)", line).group(1))
+    assert "Traceback" in traceback_file.read_text()
+    traceback_file.unlink()
+    with pytest.raises(AttributeError):  # --debug: the traceback itself
+        run_with_exit_code(carve, [not_a_camera], [np.zeros((2, 2), bool)], stream=stream,
+                           debug=True)

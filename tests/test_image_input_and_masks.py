@@ -78,6 +78,26 @@ def test_mixed_sizes_are_refused(tmp_path, scene):
         open_image_sequence(folder)
 
 
+@pytest.mark.parametrize("progressive", [False, True])
+def test_a_truncated_jpeg_is_named_at_input_checking(tmp_path, scene, progressive):
+    """The decoder fills a truncated JPEG with grey and only warns: the run would fail much
+    later with no hint of the file."""
+    folder = tmp_path / "f"
+    folder.mkdir()
+    options = [cv2.IMWRITE_JPEG_PROGRESSIVE, 1] if progressive else []
+    for number, image in enumerate(scene.images[:3]):
+        cv2.imwrite(str(folder / f"frame{number}.jpg"), image[..., ::-1], options)
+    assert len(open_image_sequence(folder)) == 3  # whole files pass
+    data = (folder / "frame1.jpg").read_bytes()
+    (folder / "frame1.jpg").write_bytes(data[:len(data) * 2 // 3])
+    assert cv2.imread(str(folder / "frame1.jpg")) is not None  # decoded, silently grey
+    with pytest.raises(InputError, match=r"frame1.jpg is truncated or corrupt"):
+        open_image_sequence(folder)
+    # data after the image's end (a phone's appended video) is no fault
+    (folder / "frame1.jpg").write_bytes(data + b"\x00\x00\x00\x18ftypmp42" + bytes(64))
+    assert len(open_image_sequence(folder)) == 3
+
+
 # -- colours and masks ----------------------------------------------------------------------
 
 def test_hue_ranges_wrap_around_red():
@@ -124,17 +144,17 @@ def test_masks_of_a_scene_are_not_shifted(scene):
         growth = [(cable_mask(image, colour, settings)[0].sum() - truth.sum()) / truth.sum()
                   for image, truth in zip(scene.images, scene.masks)]
         measured[reach] = (np.mean(np.abs(shifts)), np.mean(growth))
-    assert measured[0][0] > 0.12  # pixels, unrefined (0.14 here)
+    assert measured[0][0] > 0.15  # pixels, unrefined (0.19 here)
     # the default (the colour model, refined) is no more shifted than the refined range
     default = [centre_shift(cable_mask(image, auto_colour(scene.images[0]))[0], truth)[0]
                for image, truth in zip(scene.images, scene.masks)]
-    assert np.nanmean(np.abs(default)) < 0.15  # 0.10 here
+    assert np.nanmean(np.abs(default)) < 0.15  # 0.12 here
     # the shadow-side clean-up runs after the refinement (a contact shadow tinted by light
     # bounced off the cable is not cable), which gives back part of the shade side: the
-    # shift falls by about 30% on this scene (0.14 to 0.10 px)
+    # shift falls by about 40% on this scene (0.19 to 0.12 px)
     assert measured[2][0] < 0.8 * measured[0][0]
-    # and the area stays close (the clean-up trims the shade side a little: -3.5% here,
-    # -1% unrefined; end to end the centre matters more than the width)
+    # and the area stays close (the clean-up trims the shade side a little: -5% here,
+    # -3% unrefined; end to end the centre matters more than the width)
     assert abs(measured[2][1]) < 0.06
 
 
