@@ -51,7 +51,8 @@ def frame_image(settings, *, max_side=None):
     path = paths[min(settings.frame, len(paths) - 1)]
     size = _sizes.get(str(path.parent))
     if max_side and size is None:  # an eighth-size decode is quick and tells the size
-        small = cv2.imread(str(path), cv2.IMREAD_REDUCED_GRAYSCALE_8)
+        small = cv2.imread(str(path),
+                           cv2.IMREAD_REDUCED_GRAYSCALE_8 | cv2.IMREAD_IGNORE_ORIENTATION)
         if small is not None:
             size = _sizes[str(path.parent)] = (8 * small.shape[1], 8 * small.shape[0])
     reduction = 1
@@ -63,7 +64,7 @@ def frame_image(settings, *, max_side=None):
             frame = read_image(path)
             _sizes[str(path.parent)] = frame.shape[1::-1]
         else:
-            data = cv2.imread(str(path), _REDUCED[reduction])
+            data = cv2.imread(str(path), _REDUCED[reduction] | cv2.IMREAD_IGNORE_ORIENTATION)
             if data is None:
                 raise InputError(f"{path} cannot be read as an image")
             frame = cv2.cvtColor(data, cv2.COLOR_BGR2RGB)

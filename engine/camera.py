@@ -81,7 +81,8 @@ class Camera:
         if not (np.all(np.isfinite(params)) and np.all(np.isfinite(rotation))
                 and np.all(np.isfinite(translation))):
             raise InputError(f"camera {self.name!r}: parameters and pose must be finite numbers")
-        if (np.abs(rotation @ rotation.T - np.eye(3)).max() > 1e-6
+        if (np.abs(rotation).max() > 1.0 + 1e-6  # (a rotation's entries; no overflow below)
+                or np.abs(rotation @ rotation.T - np.eye(3)).max() > 1e-6
                 or np.linalg.det(rotation) < 0):
             raise InputError(f"camera {self.name!r}: R is not a rotation matrix")
         if int(self.width) <= 0 or int(self.height) <= 0:

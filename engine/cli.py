@@ -185,6 +185,10 @@ def _run_bench(args):
         bench = getattr(interactive_benchmark, f"bench_{args.stage}")
         rows = bench(sample=args.sample, **({"views": args.views} if args.stage == "curve"
                                              else {}))
+    elif args.stage == "faults":
+        from .fault_benchmark import bench_faults
+
+        rows = bench_faults(progress=None if args.quiet else ProgressBar())
     elif args.stage == "pipeline-looks":
         from .pipeline_benchmark import bench_pipeline_looks
 
@@ -264,8 +268,8 @@ def build_parser():
         "bench", parents=[quiet], help="measure a stage's accuracy and speed on ground-truth scenes",
         description="Print a table: one row per ground-truth scene.")
     bench.add_argument("stage", choices=["segment", "looks", "cameras", "carve", "rod",
-                                         "pipeline", "pipeline-looks", "preview", "curve",
-                                         "cancel"])
+                                         "pipeline", "pipeline-looks", "faults", "preview",
+                                         "curve", "cancel"])
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--seeds", type=int, default=3,
                        help="scenes per look family and seed set (segment, looks, "

@@ -17,17 +17,23 @@ import numpy as np
 from .colmap_model import natural_key
 from .errors import InputError
 
-__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "ImageSequence", "open_image_sequence",
-           "read_image"]
+__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "IMREAD_FRAME", "ImageSequence",
+           "open_image_sequence", "read_image"]
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 VIDEO_SUFFIXES = (".mp4", ".mov", ".m4v", ".avi", ".mkv", ".webm")
 log = logging.getLogger(__name__)
 
 
+#: How frames are decoded: colour, and the stored pixel grid whatever a phone's EXIF
+#: orientation says (pycolmap reads that grid, so masks and cameras agree on it).
+IMREAD_FRAME = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION
+
+
 def read_image(path):
-    """Read an image file as RGB uint8; :class:`InputError` naming the file if it cannot be."""
-    data = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    """Read an image file as RGB uint8, in its stored pixel grid (EXIF orientation ignored,
+    as pycolmap does); :class:`InputError` naming the file if it cannot be."""
+    data = cv2.imread(str(path), IMREAD_FRAME)
     if data is None:
         raise InputError(f"{path} cannot be read as an image")
     return cv2.cvtColor(data, cv2.COLOR_BGR2RGB)

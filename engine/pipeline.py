@@ -121,7 +121,9 @@ def read_masks(folder, names, width, height):
     junction_folder = folder.parent / "junctions"
 
     def load(path, what):
-        mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        # (a missing file is named here, not by OpenCV's warning on stderr)
+        mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE | cv2.IMREAD_IGNORE_ORIENTATION) \
+            if path.is_file() else None
         if mask is None:
             raise InputError(f"{what} {path} is missing or not an image")
         if mask.shape != (height, width):
@@ -266,6 +268,11 @@ def _cameras(sequence, cameras, settings, stage, cancel):
     if not known:
         raise InputError("no camera of the model is named after a frame "
                          f"(frames: {', '.join(sorted(names)[:3])}, ...)")
+    for camera in known:
+        if (camera.width, camera.height) != (sequence.width, sequence.height):
+            raise InputError(f"the model's camera of {camera.name} is {camera.width}x"
+                             f"{camera.height} but the frame is {sequence.width}x"
+                             f"{sequence.height}: the model is of other images")
     missing = sorted(names - {camera.name for camera in known})
     if missing:
         warnings.append(f"{len(missing)} frame(s) have no camera and were left out: "

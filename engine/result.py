@@ -275,6 +275,9 @@ def result_from_dict(data):
         if not isinstance(closed, bool):
             raise ResultFormatError(f"{where}.closed must be true or false")
         paths.append(CablePath(points, radii, closed))
+    for key in ("crossings", "cameras"):
+        if not isinstance(data.get(key, []), list):
+            raise ResultFormatError(f"result.{key} must be a list")
     crossings = []
     for k, raw in enumerate(data.get("crossings", [])):
         where = f"crossings[{k}]"

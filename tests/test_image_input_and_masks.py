@@ -98,6 +98,24 @@ def test_a_truncated_jpeg_is_named_at_input_checking(tmp_path, scene, progressiv
     assert len(open_image_sequence(folder)) == 3
 
 
+def test_exif_rotated_photos_are_read_in_their_stored_grid(tmp_path, scene):
+    """A phone's portrait photo is stored landscape with an EXIF orientation; pycolmap reads
+    the stored grid, so the masks must too (OpenCV would rotate it by default)."""
+    from engine.fault_benchmark import with_exif_orientation
+    from engine.image_sequence import read_image
+
+    folder = write_frames(tmp_path / "f", scene.images[:2])
+    for path in folder.iterdir():
+        ok, data = cv2.imencode(".jpg", cv2.imread(str(path)))
+        path.unlink()
+        path.with_suffix(".jpg").write_bytes(with_exif_orientation(data.tobytes()))
+    first = sorted(folder.iterdir())[0]
+    assert cv2.imread(str(first)).shape[:2] == (640, 480)  # OpenCV's default turns it
+    sequence = open_image_sequence(folder)
+    assert (sequence.width, sequence.height) == (640, 480)
+    assert read_image(first).shape[:2] == (480, 640) == sequence.read(0).shape[:2]
+
+
 # -- colours and masks ----------------------------------------------------------------------
 
 def test_hue_ranges_wrap_around_red():
