@@ -389,8 +389,7 @@ def fit_result_curves(result, *, settings=BezierSettings()):
         errors.append(max(there, back) / r)
     warnings = [f"the curve's strands at crossing {number + 1} are {gap / r:.2f} r apart, "
                 f"less than {settings.crossing_gap:g} r: they may touch"
-                for number, gap in enumerate(curve_gaps)
-                if gap < settings.crossing_gap * r - 1e-9]
+                for number, (gap, missing) in enumerate(zip(curve_gaps, short)) if missing > 0]
     report = {"control_points": int(sum(len(c.knots) for c in curves)),
               "max_error": float(max(errors)),
               "crossing_gaps": [(float(c) / r, g / r) for c, g in zip(curve_gaps, gaps)],

@@ -115,9 +115,9 @@ class CarvingSettings:
         if not (0.0 < self.vote <= 1.0 and 0.0 < self.core_agreement <= 1.0):
             raise ValueError("vote and core_agreement must lie in (0, 1]")
         if (self.voxels_per_radius <= 0 or self.min_views < 1 or self.root_cells < 2
-                or self.threads < 0):
-            raise ValueError("voxels_per_radius must be positive, min_views >= 1, "
-                             "root_cells >= 2, threads >= 0")
+                or self.threads < 0 or not self.memory_mb > 0):
+            raise ValueError("voxels_per_radius and memory_mb must be positive, "
+                             "min_views >= 1, root_cells >= 2, threads >= 0")
 
 
 @dataclass(frozen=True, eq=False)
@@ -390,6 +390,8 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
     ------
     ValueError
         Masks and cameras do not match, or no view shows the cable.
+    ReconstructionError
+        The voxels would take more than ``settings.memory_mb``.
     Cancelled
     """
     cameras = list(cameras)
@@ -427,6 +429,7 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
     cells = int(math.ceil(side / (fine * 2 ** levels)))
     log.debug("carving %d views: radius %.4g, voxel %.4g, %d levels from %d^3",
               len(views), radius, fine, levels, cells)
+    _check_memory(cells ** 3 * _LEVEL_BYTES, settings, f"{cells ** 3:,} voxels at level {levels}")
     index = np.argwhere(np.ones((cells,) * 3, dtype=bool)).astype(np.int64)
     steps = levels + 1
     threads = settings.threads or os.cpu_count() or 1
@@ -442,9 +445,12 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
                 _check_memory(8 * len(index) * _LEVEL_BYTES, settings,
                               f"{8 * len(index):,} voxels of {size / 2:.3g} at level {level - 1}")
                 index = (2 * index[:, None, :] + _CHILDREN[None]).reshape(-1, 3)
+    if len(index):  # the pieces are labelled on the box pooled 2x2x2 (a bool, an int32)
+        box = np.prod(index.max(axis=0) - index.min(axis=0) + 3, dtype=np.float64)
+        _check_memory(box / 8 * 5, settings, f"the pieces of a box of {box:,.0f} voxels")
     large = _large_pieces(index, fine, settings.min_piece_length * radius)
     index = index[large]
-    if len(index):
+    if len(index):  # without the small pieces (ghosts far from the cable), the grid's box
         box = np.prod(index.max(axis=0) - index.min(axis=0) + 3, dtype=np.float64)
         _check_memory(len(index) * _OCCUPIED_BYTES + box * _BOX_BYTES, settings,
                       f"{len(index):,} occupied voxels in a box of {box:,.0f}")

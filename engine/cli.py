@@ -302,11 +302,12 @@ def run_with_exit_code(run, *args, stream=None, debug=False):
     """Call ``run(*args)``; the exit code, with a one-line reason on ``stream`` on failure.
 
     0 success (or what ``run`` returns), 2 bad input, 3 reconstruction failed, 4 an internal
-    error (a bug; re-raised when ``debug``), 130 cancelled.
+    error (a bug: the line names the engine's module, function and line it came from and the
+    file its traceback went to; re-raised when ``debug``), 130 cancelled.
     """
     stream = stream or sys.stderr
     try:
-        return _run_naming_bugs(run, args, stream, debug)
+        return run(*args) or EXIT_OK
     except InputError as error:
         print(f"error: {error}", file=stream)
         return EXIT_BAD_INPUT
@@ -319,28 +320,18 @@ def run_with_exit_code(run, *args, stream=None, debug=False):
     except (Cancelled, KeyboardInterrupt):
         print("cancelled", file=stream)
         return 130
-
-
-def _run_naming_bugs(run, args, stream, debug):
-    """``run(*args)``; an unexpected exception (a bug) is one line naming the engine module,
-    function and line it came from and the file its traceback went to, and exit code 4."""
-    try:
-        return run(*args) or EXIT_OK
-    except (InputError, ReconstructionError, FileExistsError, Cancelled, KeyboardInterrupt):
-        raise
     except Exception as error:
         if debug:
             raise
-        where = _where(error)
         path = Path(tempfile.gettempdir()) / f"cable_recon-traceback-{os.getpid()}.txt"
         try:
             path.write_text("".join(traceback.format_exception(error)))
             kept = f"the traceback is in {path}"
         except OSError:
             kept = "run with --debug to see the traceback"
-        print(f"internal error (a bug, please report it) in {where}: "
-              f"{type(error).__name__}: {str(error).splitlines()[0] if str(error) else ''} "
-              f"({kept})", file=stream)
+        message = str(error).splitlines()[0] if str(error) else ""
+        print(f"internal error (a bug, please report it) in {_where(error)}: "
+              f"{type(error).__name__}: {message} ({kept})", file=stream)
         return EXIT_BUG
 
 
@@ -348,12 +339,11 @@ def _where(error):
     """``module.function:line`` of the deepest frame of the engine (or the add-on) in the
     traceback, else of the deepest frame."""
     frames = traceback.extract_tb(error.__traceback__)
-    package = Path(__file__).resolve().parents[1]
-    ours = [frame for frame in frames if Path(frame.filename).resolve().is_relative_to(package)]
+    root = Path(__file__).resolve().parents[1]
+    ours = [frame for frame in frames
+            if any(Path(frame.filename).resolve().is_relative_to(root / package)
+                   for package in ("engine", "addon"))]
     frame = (ours or frames)[-1]
-    try:
-        module = Path(frame.filename).resolve().relative_to(package).with_suffix("")
-        name = ".".join(module.parts)
-    except ValueError:
-        name = Path(frame.filename).stem
+    path = Path(frame.filename).resolve()
+    name = ".".join(path.relative_to(root).with_suffix("").parts) if ours else path.stem
     return f"{name}.{frame.name}:{frame.lineno}"

@@ -5,12 +5,13 @@ look departs from a saturated cable on a grey table: a pale cable's shade side l
 black cable's box takes in every shadow, and an automatic box picks whatever is most saturated.
 Here a box (set by hand, picked, or found automatically) only *seeds* the cable:
 
-1. :func:`find_cable_colour` (automatic): the frame's colours are clustered (k-means in Lab)
+1. :func:`find_cable` (automatic): the frame's colours are clustered (k-means in Lab)
    and every cluster, and every pair of clusters (a cable's lit and shade sides), is scored as
    a candidate cable: how much of it is *thin* (long connected pieces of one width, at most a
    few percent of the frame), how long those pieces are, and how much it stands out from what
    lies around it, chromaticity counting double (a shadow has its surface's chromaticity, only
-   darker; a coloured cable does not). The best candidate's pixels give the HSV box.
+   darker; a coloured cable does not). The best candidate's pixels, with the shade side beside
+   them (:func:`.segmentation.colour_seed`), give the HSV box.
 2. :class:`ColourModel`: the box's thin pieces on a few frames are the cable's samples, the
    pixels well away from them the background's; their colour histograms (RGB, smoothed) give
    each colour's probability of being cable, looked up per pixel (a histogram back-projection,
@@ -29,7 +30,7 @@ from scipy.ndimage import gaussian_filter
 from .colour_range import ColourRange, hsv_image
 from .errors import ReconstructionError
 
-__all__ = ["ColourModel", "find_cable", "find_cable_colour", "range_of", "thin_pieces", "thickest",
+__all__ = ["ColourModel", "find_cable", "range_of", "thin_pieces", "thickest",
            "colour_candidates",
            "CableCandidate", "opened"]
 
@@ -293,6 +294,10 @@ def range_of(hsv_pixels, *, shade=0.5):
         OpenCV HSV values.
     shade : float, optional
         Below 1 for pixels that may miss the cable's shade side (a candidate's clusters).
+
+    Returns
+    -------
+    ColourRange
     """
     h, s, v = (hsv_pixels[:, k].astype(float) for k in range(3))
     v_low, v_high = np.percentile(v, [1.0, 99.5])
@@ -345,11 +350,6 @@ def find_cable(images_rgb):
                                     diagonal)
     best = candidates[int(np.argmax(totals))]
     return range_of(hsv_image(small)[best.mask]), best
-
-
-def find_cable_colour(images_rgb):
-    """The HSV box of the cable found by :func:`find_cable` (what the panel shows)."""
-    return find_cable(images_rgb)[0]
 
 
 def model_space(image_rgb):

@@ -125,10 +125,10 @@ def _other_names(text):
 
 
 def _half_the_images(text):
+    """The first half of the images (each a pose line and an empty points line)."""
     lines = text.splitlines()
-    data = [k for k, line in enumerate(lines) if line and not line.startswith("#")]
-    # each image is two lines (pose, points): keep the first half
-    keep = set(data[:len(data) // 2 // 2 * 2])
+    poses = [k for k, line in enumerate(lines) if line and not line.startswith("#")]
+    keep = set(poses[:len(poses) // 2])
     return "\n".join(line for k, line in enumerate(lines)
                      if k in keep or line.startswith("#") or not line) + "\n"
 

@@ -837,6 +837,21 @@ def _initial_chain(points, radius, closed, settings):
 
 def _strand_vertices(strand, input_arc, count, closed, span):
     """The rod vertices of one strand of a :class:`Contact` (see there)."""
+    first, last = _strand_range(strand, input_arc, count, closed, span)
+    vertices = np.arange(first, last + 1)
+    return np.unique(vertices % count if closed else np.clip(vertices, 0, count - 1))
+
+
+def _strand_middle(strand, input_arc, count, closed):
+    """The rod vertex in the middle of a strand (a closed rod's numbering wraps)."""
+    first, last = _strand_range(strand, input_arc, count, closed, 0)
+    middle = (first + last) // 2
+    return middle % count if closed else int(np.clip(middle, 0, count - 1))
+
+
+def _strand_range(strand, input_arc, count, closed, span):
+    """``(first, last)`` rod vertex of a strand, unwrapped (checked as :class:`Contact`
+    says)."""
     indices = np.atleast_1d(np.asarray(strand))
     if indices.dtype.kind not in "iu" or indices.size not in (1, 2):
         raise ValueError("a strand is an index or a (first, last) pair of indices")
@@ -845,9 +860,7 @@ def _strand_vertices(strand, input_arc, count, closed, span):
     if indices.size == 2 and indices[0] > indices[1]:
         raise ValueError("a range must be (first, last) with first <= last")
     ends = np.rint(input_arc[indices] * (count if closed else count - 1)).astype(int)
-    first, last = (ends[0] - span, ends[0] + span) if indices.size == 1 else ends
-    vertices = np.arange(first, last + 1)
-    return np.unique(vertices % count if closed else np.clip(vertices, 0, count - 1))
+    return (ends[0] - span, ends[0] + span) if indices.size == 1 else (ends[0], ends[1])
 
 
 def _obstacle_pairs(obstacles, input_arc, count, closed, settings):
@@ -890,7 +903,8 @@ def _contact_pairs(contacts, input_arc, count, closed, settings):
         shared = np.intersect1d(over, under)
         if shared.size:
             # a strand's middle inside the other strand: one place, not a crossing
-            inside = np.isin(over[len(over) // 2], under) or np.isin(under[len(under) // 2], over)
+            inside = (np.isin(_strand_middle(contact.over, input_arc, count, closed), under)
+                      or np.isin(_strand_middle(contact.under, input_arc, count, closed), over))
             over, under = np.setdiff1d(over, shared), np.setdiff1d(under, shared)
             if inside or not (over.size and under.size):
                 warnings.append(f"a crossing (points {contact.over} over {contact.under}) "

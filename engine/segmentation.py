@@ -110,7 +110,9 @@ class SegmentationSettings:
         The model's cable pixels (:func:`colour_seed`) take in the pixels within
         ``seed_shade_reach`` cable widths of them whose chromaticity is within
         ``seed_shade_chroma`` of theirs: the shade side, which a found colour's clusters
-        miss (shading darkens a colour, it keeps its chromaticity).
+        miss (shading darkens a colour, it keeps its chromaticity). A cable whose
+        chromaticity is within twice ``seed_shade_chroma`` of its surroundings' counts as
+        colourless: neither this nor ``shade_chroma`` applies.
     """
 
     speck_area: float = 3.0
@@ -318,9 +320,8 @@ def _with_shade(image_rgb, seed, objects, width, settings):
     near = _within(seed, reach)
     around = _within(near, reach) & ~near
     chroma = _chroma(image_rgb)
-    inside = np.median(chroma[seed], axis=0)
-    if not around.any() or \
-            np.linalg.norm(inside - np.median(chroma[around], axis=0)) < 2 * settings.seed_shade_chroma:
+    inside, gap = _chroma_gap(chroma[seed], chroma[around])
+    if gap < 2 * settings.seed_shade_chroma:
         return seed
     ring = near & ~seed & ~objects
     close = np.linalg.norm(chroma - inside, axis=-1) < settings.seed_shade_chroma
@@ -402,16 +403,14 @@ def _shade_side(image_rgb, sure, distance, reach, settings):
     times its distance from the surroundings' chromaticity; shading keeps a colour's
     chromaticity), and darker than the surroundings (the pixels up to :data:`_AROUND` pixels
     farther; a brighter pixel of that chromaticity beside a cable is its glow or light it
-    throws on the table). None for a cable of its surroundings' chromaticity."""
+    throws on the table). No pixel for a cable of its surroundings' chromaticity (closer than
+    ``2 * seed_shade_chroma``, the same cut-off as the seed's)."""
     side = np.zeros_like(sure)
     around = (distance > reach) & (distance <= reach + _AROUND)
-    if not around.any():
-        return side
     # the colours of every third row and column are plenty
     sample = image_rgb[::3, ::3]
-    inside = np.median(_chroma(sample[sure[::3, ::3]]), axis=0)
     surroundings = sample[around[::3, ::3]]
-    gap = np.linalg.norm(inside - np.median(_chroma(surroundings), axis=0))
+    inside, gap = _chroma_gap(_chroma(sample[sure[::3, ::3]]), _chroma(surroundings))
     if gap < 2.0 * settings.seed_shade_chroma:
         return side
     rows, cols = np.nonzero((distance <= reach) & ~sure)
@@ -423,6 +422,15 @@ def _shade_side(image_rgb, sure, distance, reach, settings):
         & (brightness < np.median(surroundings.sum(axis=-1, dtype=np.int32)))
     side[rows[shade], cols[shade]] = True
     return side
+
+
+def _chroma_gap(cable, surroundings):
+    """The cable's median chromaticity and its distance from the surroundings' (0 when
+    either has no pixel): below ``2 * seed_shade_chroma`` the cable is colourless there."""
+    if not (len(cable) and len(surroundings)):
+        return np.zeros(3, np.float32), 0.0
+    inside = np.median(cable, axis=0)
+    return inside, float(np.linalg.norm(inside - np.median(surroundings, axis=0)))
 
 
 def _within(mask, distance):

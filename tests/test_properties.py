@@ -92,10 +92,16 @@ def test_any_json_document_reads_or_is_an_input_error(value):
 
 
 @SLOW
-@given(st.binary(max_size=200))
-def test_any_file_reads_or_is_an_input_error(tmp_path, data):
+@given(st.lists(st.tuples(st.integers(0, 10**6), st.binary(max_size=3)), min_size=1,
+                max_size=4))
+def test_any_damaged_file_reads_or_is_an_input_error(tmp_path, edits):
+    """A valid file with a few bytes replaced (cut short, garbled, not UTF-8, not JSON)."""
+    data = bytearray(json.dumps(VALID).encode())
+    for position, replacement in edits:
+        position %= len(data) + 1
+        data[position:position + len(replacement) + 1] = replacement
     path = tmp_path / "result.json"
-    path.write_bytes(data)
+    path.write_bytes(bytes(data))
     try:
         read_result(path)
     except InputError:
