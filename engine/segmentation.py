@@ -319,14 +319,17 @@ def _with_shade(image_rgb, seed, objects, width, settings):
     reach = settings.seed_shade_reach * width
     near = _within(seed, reach)
     around = _within(near, reach) & ~near
-    chroma = _chroma(image_rgb)
-    inside, gap = _chroma_gap(chroma[seed], chroma[around])
+    # chromaticities of the pixels that matter only, not of the whole frame
+    inside, gap = _chroma_gap(_chroma(image_rgb[seed]), _chroma(image_rgb[around]))
     if gap < 2 * settings.seed_shade_chroma:
         return seed
-    ring = near & ~seed & ~objects
-    close = np.linalg.norm(chroma - inside, axis=-1) < settings.seed_shade_chroma
-    lit = image_rgb.sum(axis=-1, dtype=np.int32) >= _CHROMA_FLOOR
-    return seed | (ring & close & lit)
+    rows, cols = np.nonzero(near & ~seed & ~objects)
+    pixels = image_rgb[rows, cols]
+    grow = (np.linalg.norm(_chroma(pixels) - inside, axis=-1) < settings.seed_shade_chroma) \
+        & (pixels.sum(axis=-1, dtype=np.int32) >= _CHROMA_FLOOR)
+    grown = seed.copy()
+    grown[rows[grow], cols[grow]] = True
+    return grown
 
 
 def learn_colour_model(images_rgb, colour, settings=SegmentationSettings()):
