@@ -41,8 +41,6 @@ _CLUSTERS = 8
 _MAX_LOOPS = 12
 #: A cable covers at most this share of a frame.
 _MAX_COVERAGE = 0.3
-import os
-_GROW = float(os.environ.get("GROW", "0"))
 
 
 def _small(image_rgb, size=_SMALL):
@@ -386,10 +384,7 @@ def _histograms(images_rgb, seeds, widths, bins, others=None):
         if not seed.any():
             continue
         seed = seed.astype(np.uint8)
-        reach = int(round(_GROW * width))
-        core = cv2.dilate(seed, cv2.getStructuringElement(
-            cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))) if reach > 0 else \
-            cv2.erode(seed, cross)
+        core = cv2.erode(seed, cross)
         grow = max(int(math.ceil(width)), 2)
         far = cv2.dilate(seed, cv2.getStructuringElement(
             cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))) == 0
