@@ -34,8 +34,12 @@ __all__ = ["ColourModel", "find_cable", "range_of", "thin_pieces", "thickest",
            "colour_candidates",
            "CableCandidate", "opened"]
 
-#: Frames are clustered and scored at this size (the longer side, pixels).
+#: Frames are clustered and scored at this size (the longer side, pixels); larger frames are
+#: also tried at twice, four times... the size, and a larger size is chosen when its best
+#: candidate is at least ``_SHARPER`` times more cable-like than the best so far (a wire a few
+#: pixels wide in a large frame vanishes when the frame is reduced to this size).
 _SMALL = 480
+_SHARPER = 2.0
 _CLUSTERS = 8
 #: A candidate enclosing more holes than this is penalised as a net, not a cable.
 _MAX_LOOPS = 12
@@ -154,10 +158,10 @@ def _score(mask, lab, diagonal):
     return float(score)
 
 
-def _clusters(image_rgb, clusters=_CLUSTERS):
+def _clusters(image_rgb, clusters=_CLUSTERS, size=_SMALL):
     """The frame at the scoring size, in Lab, each pixel's colour cluster (k-means) and the
     clusters' centres (Lab)."""
-    small = _small(image_rgb)
+    small = _small(image_rgb, size)
     lab = _lab(small)
     samples = lab.reshape(-1, 3)[::3].astype(np.float32)
     cv2.setRNGSeed(7)  # the same frame, the same clusters
@@ -223,12 +227,23 @@ class CableCandidate:
         return np.isin(_nearest(_lab(image_rgb), self.centres), self.members)
 
 
-def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3):
+def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3, size=_SMALL):
     """The most cable-like groups of colour clusters of a frame, best first.
 
     Each cluster starts a group; clusters are added to it while they make it more cable-like
     (a cable's lit side, shade side, highlight or stripes are different clusters of one thin
     object). A cluster that looks like a shadow (:func:`_shadow_likeness`) counts for less.
+
+    Parameters
+    ----------
+    image_rgb : ndarray
+        RGB uint8.
+    clusters : int, optional
+        Colour clusters (k-means in Lab).
+    keep : int, optional
+        Candidates returned.
+    size : int, optional
+        The frame is reduced so its longer side is at most this many pixels.
 
     Returns
     -------
@@ -237,7 +252,7 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3):
     candidates : list of CableCandidate
         Best first, at most ``keep``.
     """
-    small, lab, labels, centres = _clusters(image_rgb, clusters)
+    small, lab, labels, centres = _clusters(image_rgb, clusters, size)
     diagonal = math.hypot(*small.shape[:2])
     single = [labels == k for k in range(clusters)]
     penalty = [1.0 - 0.7 * _shadow_likeness(small, mask) for mask in single]
@@ -310,6 +325,10 @@ def range_of(hsv_pixels, *, shade=0.5):
     return ColourRange((low, int(0.7 * s_low), int(shade * v_low)), (high, 255, 255))
 
 
+def _best_score(candidates):
+    return candidates[0].score if candidates else 0.0
+
+
 def find_cable(images_rgb):
     """The cable, found automatically: the most cable-like candidate of the frames.
 
@@ -318,7 +337,8 @@ def find_cable(images_rgb):
     images_rgb : sequence of ndarray
         One or more frames of the sequence (RGB uint8); candidates come from the first, and
         each is scored on every frame (a cable is thin in every view; a chance alignment of
-        a table's pattern is not).
+        a table's pattern is not). Frames more than twice ``_SMALL`` are also scored at
+        larger sizes (:data:`_SHARPER`).
 
     Returns
     -------
@@ -332,14 +352,20 @@ def find_cable(images_rgb):
         No candidate is thin (no cable pixels).
     """
     images_rgb = list(images_rgb)
-    small, candidates = colour_candidates(images_rgb[0])
+    size, (small, candidates) = _SMALL, colour_candidates(images_rgb[0])
+    larger = 2 * _SMALL
+    while larger < max(images_rgb[0].shape[:2]):
+        found = colour_candidates(images_rgb[0], size=larger)
+        if _best_score(found[1]) >= _SHARPER * _best_score(candidates):
+            size, (small, candidates) = larger, found
+        larger *= 2
     candidates = [candidate for candidate in candidates if candidate.score > 0]
     if not candidates:
         raise ReconstructionError("no cable pixels: nothing thin of one colour stands out in "
                                   "the frames (pick the cable's colour, or give --hsv)")
     totals = np.array([candidate.score for candidate in candidates], dtype=float)
     for image in images_rgb[1:]:  # agreement across frames: each candidate scored on the others
-        other = _small(image)
+        other = _small(image, size)
         other_lab = _lab(other)
         diagonal = math.hypot(*other.shape[:2])
         labels = _nearest(other_lab, candidates[0].centres)

@@ -89,6 +89,35 @@ def test_a_net_of_thin_lines_is_not_the_cable():
     assert (found & (cable > 0)).sum() > 0.8 * found.sum()
 
 
+def _wire_on_a_busy_table(width, height, wire):
+    """A red wire ``wire`` pixels wide on a table of beige and brown blobs."""
+    rng = np.random.default_rng(3)
+    image = np.full((height, width, 3), (170, 150, 120), np.uint8)
+    for _ in range(300):
+        centre = (int(rng.integers(0, width)), int(rng.integers(0, height)))
+        axes = (int(rng.integers(20, 120)), int(rng.integers(10, 60)))
+        colour = tuple(int(c) for c in rng.integers(90, 200, 3))
+        cv2.ellipse(image, centre, axes, float(rng.uniform(0, 180)), 0, 360, colour, -1)
+    curve = np.column_stack([np.linspace(0.1, 0.9, 40) * width,
+                             (0.5 + 0.3 * np.sin(np.linspace(0, 9, 40))) * height])
+    cable = np.zeros((height, width), np.uint8)
+    cv2.polylines(cable, [curve.astype(np.int32)], False, 1, wire)
+    image[cable > 0] = (180, 30, 30)
+    return image, cable > 0
+
+
+def test_a_thin_wire_in_a_large_frame_is_found(monkeypatch):
+    from engine import colour_model
+
+    image, cable = _wire_on_a_busy_table(2880, 1920, 5)
+    _, candidate = find_cable([image])
+    assert iou(candidate.select_rgb(image), cable) > 0.7
+    # at the first scoring size alone the wire is under a pixel wide and a blob is chosen
+    monkeypatch.setattr(colour_model, "_SHARPER", np.inf)
+    _, candidate = find_cable([image])
+    assert iou(candidate.select_rgb(image), cable) < 0.3
+
+
 def test_no_cable_is_a_clear_error():
     with pytest.raises(ReconstructionError, match="no cable pixels"):
         find_cable([np.full((240, 320, 3), 128, np.uint8)])
