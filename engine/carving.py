@@ -39,6 +39,7 @@ import numpy as np
 from scipy import ndimage
 
 from .errors import ReconstructionError
+from .packed_mask import PackedMask, unpacked
 from .progress import StageProgress, check_cancel
 from .segmentation import cable_width
 from .upright import look_at_point
@@ -165,12 +166,6 @@ class VoxelGrid:
         return self.occupied.shape
 
 
-def _load(item):
-    """A mask from an array or a callable returning one, as bool."""
-    mask = item() if callable(item) else item
-    return np.asarray(mask, dtype=bool)
-
-
 def _radius_in_view(camera, mask, centre):
     """Half the cable's width in ``mask`` at the depth of ``centre``, in world units (None if
     the view shows no cable or looks away)."""
@@ -211,15 +206,10 @@ class _View:
 
     def __init__(self, camera, mask, junction, keep_distance):
         self.camera = camera
-        self.shape = mask.shape
-        self.packed = np.packbits(mask, axis=None)
+        self.mask = mask if isinstance(mask, PackedMask) else PackedMask(mask)
         self.junction = junction
         self.keep_distance = keep_distance
         self._distance = None
-
-    def mask(self):
-        size = self.shape[0] * self.shape[1]
-        return np.unpackbits(self.packed, count=size).reshape(self.shape).astype(bool)
 
     def distance(self, mask):
         if self._distance is not None:
@@ -314,7 +304,7 @@ class _Carver:
         for number, view in enumerate(self.views):
             check_cancel(self.cancel, "carving")
             mask = view.mask()
-            junction = _load(view.junction) if fine and view.junction is not None else None
+            junction = unpacked(view.junction) if fine and view.junction is not None else None
             if not fine:
                 distance = view.distance(mask)
 
@@ -410,13 +400,14 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
     keep_distances = 2 * pixels <= settings.cache_mb * 2 ** 20
     for camera, item, junction in zip(cameras, masks, junctions):
         check_cancel(cancel, "carving")
-        mask = _load(item)
+        mask = unpacked(item)
         if mask.shape != (camera.height, camera.width):
             raise ValueError(f"the mask of {camera.name!r} is {mask.shape[1]}x{mask.shape[0]}, "
                              f"its image {camera.width}x{camera.height}")
         if radius is None:
             radii.append(_radius_in_view(camera, mask, centre))
-        views.append(_View(camera, mask, junction, keep_distances))
+        views.append(_View(camera, item if isinstance(item, PackedMask) else mask, junction,
+                           keep_distances))
     if radius is None:
         radii = [value for value in radii if value is not None]
         if not radii:

@@ -185,6 +185,12 @@ def _run_bench(args):
         bench = getattr(interactive_benchmark, f"bench_{args.stage}")
         rows = bench(sample=args.sample, **({"views": args.views} if args.stage == "curve"
                                              else {}))
+    elif args.stage == "memory":
+        from .memory_benchmark import MEMORY_COLUMNS, bench_memory
+
+        rows = bench_memory(progress=None if args.quiet else ProgressBar())
+        print(format_table(rows, MEMORY_COLUMNS))
+        return
     elif args.stage == "faults":
         from .fault_benchmark import bench_faults
 
@@ -269,7 +275,7 @@ def build_parser():
         description="Print a table: one row per ground-truth scene.")
     bench.add_argument("stage", choices=["segment", "looks", "cameras", "carve", "rod",
                                          "pipeline", "pipeline-looks", "faults", "preview",
-                                         "curve", "cancel"])
+                                         "curve", "cancel", "memory"])
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--seeds", type=int, default=3,
                        help="scenes per look family and seed set (segment, looks, "

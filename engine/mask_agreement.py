@@ -43,6 +43,7 @@ import cv2
 import numpy as np
 
 from .carving import CarvingSettings, carve
+from .packed_mask import PackedMask, unpacked
 from .progress import StageProgress, check_cancel
 from .segmentation import SegmentationSettings, cable_width, junction_map
 from .skeleton_2d import fill_small_holes, thin
@@ -137,7 +138,7 @@ class MaskAgreementReport:
         Views the last round left as they were: no voxel the other views carve lies in
         their frame, or their mask would have lost more than ``max_removed`` (probably a
         wrong camera).
-    junctions : list of ndarray of bool, or None
+    junctions : list of ndarray of bool (PackedMask when packed), or None
         The junction maps given, brought up to date with the agreed masks (given ones kept
         on the mask, new ones found where breaks were filled); None if none were given.
     """
@@ -158,14 +159,13 @@ class MaskAgreementReport:
                 f"{(filled > 0).sum()} view(s)")
 
 
-def _load(item, dtype):
-    value = item() if callable(item) else item
-    return None if value is None else np.asarray(value, dtype=dtype)
+def _packed(item):
+    return item if isinstance(item, PackedMask) else PackedMask(unpacked(item))
 
 
 def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=CarvingSettings(),
                 settings=MaskAgreementSettings(), segmentation=SegmentationSettings(),
-                progress=None, cancel=None):
+                progress=None, cancel=None, packed=False):
     """Masks with what no other view backs removed and breaks the others bridge filled.
 
     Parameters
@@ -187,10 +187,14 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
     progress : callable, optional
         ``progress(fraction, message)``.
     cancel : threading.Event, optional
+    packed : bool, optional
+        Return the masks and the report's junction maps as :class:`.PackedMask`: the masks
+        are held packed throughout (one view's arrays at a time), for long sequences of
+        large frames.
 
     Returns
     -------
-    masks : list of ndarray of bool
+    masks : list of ndarray of bool, or of PackedMask
         The agreed masks (the given ones, as arrays, if nothing changed).
     report : MaskAgreementReport
 
@@ -202,7 +206,7 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
     """
     cameras = list(cameras)
     names = tuple(camera.name for camera in cameras)
-    given = [_load(item, bool) for item in masks]
+    given = [_packed(item) for item in masks]
     if len(given) != len(cameras):
         raise ValueError(f"{len(given)} masks for {len(cameras)} cameras")
     for camera, mask in zip(cameras, given):
@@ -215,7 +219,7 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
     if junctions is not None and len(junctions) != len(cameras):
         raise ValueError(f"{len(junctions)} junction maps for {len(cameras)} cameras")
     stage = StageProgress(progress)
-    current = [mask.copy() for mask in given]
+    current = list(given)  # packed masks are never changed, only replaced
     changed, left_alone, radius = [], [], None
     rounds = settings.rounds if len(cameras) >= carving.min_views else 0
     for number in range(rounds):
@@ -237,14 +241,15 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
         views = part.part(0.6, 1.0)
         for k, camera in enumerate(cameras):
             check_cancel(cancel, "the mask agreement")
-            new, judged = _agree_view(camera, current[k], _load(evidence[k], np.float32),
-                                      voxels, settings)
+            mask = current[k]()
+            new, judged = _agree_view(camera, mask, unpacked(evidence[k], np.float32), voxels,
+                                      settings)
             if not judged:
                 left_alone.append(camera.name)
-            elif new is not current[k]:
-                pixels += int(np.count_nonzero(new != current[k]))
-                current[k] = new
-            count += int(np.count_nonzero(current[k]))
+            elif new is not mask:
+                pixels += int(np.count_nonzero(new != mask))
+                current[k] = PackedMask(new)
+            count += current[k].count
             views((k + 1) / len(cameras), "agreeing masks")
         changed.append(pixels)
         log.debug("agreement round %d: %d pixels changed", number + 1, pixels)
@@ -252,18 +257,20 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
                 or (len(changed) > 1 and pixels >= changed[-2])):
             break
     stage(1.0, "masks agreed")
-    removed = tuple(int(np.count_nonzero(g & ~c)) for g, c in zip(given, current))
-    filled = tuple(int(np.count_nonzero(c & ~g)) for g, c in zip(given, current))
-    updated = None
-    if junctions is not None:
-        updated = [_updated_junctions(_load(item, bool), g, c, segmentation)
-                   for item, g, c in zip(junctions, given, current)]
-    report = MaskAgreementReport(names=names, removed=removed, filled=filled,
+    removed, filled, updated = [], [], None if junctions is None else []
+    for k, (old, new) in enumerate(zip(given, current)):
+        old, new = old(), (old() if new is old else new())
+        removed.append(int(np.count_nonzero(old & ~new)))
+        filled.append(int(np.count_nonzero(new & ~old)))
+        if junctions is not None:
+            junction = _updated_junctions(unpacked(junctions[k]), old, new, segmentation)
+            updated.append(PackedMask(junction) if packed else junction)
+    report = MaskAgreementReport(names=names, removed=tuple(removed), filled=tuple(filled),
                                  rounds=len(changed), changed=tuple(changed),
                                  left_alone=tuple(left_alone),
                                  junctions=updated)
     log.debug(report.summary())
-    return current, report
+    return (current if packed else [mask() for mask in current]), report
 
 
 def _agreement_carving(carving, settings):

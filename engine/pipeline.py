@@ -30,6 +30,7 @@ from .errors import InputError, ReconstructionError
 from .image_sequence import open_image_sequence, read_image
 from .mask_agreement import MaskAgreementSettings, agree_masks
 from .metrics import Similarity
+from .packed_mask import PackedMask, unpacked
 from .progress import StageProgress, check_cancel
 from .result import CablePath, Crossing, Result, StrandRef
 from .rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
@@ -84,28 +85,33 @@ class PipelineSettings:
 
 @dataclass(frozen=True, eq=False)
 class View:
-    """One registered frame: its camera, a loader of its image, its masks."""
+    """One registered frame: its camera, a loader of its image, its masks.
+
+    The masks are :class:`.PackedMask` (call one for its array): a long sequence of large
+    frames keeps every view's masks in an eighth of the memory.
+    """
 
     camera: object
     path: Path
-    mask: np.ndarray
-    junctions: np.ndarray
+    mask: PackedMask
+    junctions: PackedMask
 
     def image(self):
         """The frame, RGB."""
         return read_image(self.path)
 
 
-def read_masks(folder, names, width, height):
+def read_masks(folder, names, width, height, *, packed=False):
     """Masks written by ``segment`` (possibly corrected by hand), one per frame.
 
     ``folder`` is the ``segment`` output folder (with ``masks/`` and ``junctions/``) or its
     ``masks/`` folder; a frame's mask is ``<stem>.png`` (cable > 127). Junction maps are read
     from the sibling ``junctions/`` folder when every frame has one, else made from the masks.
+    With ``packed``, each is kept as a :class:`.PackedMask` as soon as it is read.
 
     Returns
     -------
-    masks, junctions : list of ndarray of bool
+    masks, junctions : list of ndarray of bool (or of PackedMask)
         ``junctions`` is None when they must be made from the masks.
 
     Raises
@@ -129,7 +135,7 @@ def read_masks(folder, names, width, height):
         if mask.shape != (height, width):
             raise InputError(f"{what} {path} is {mask.shape[1]}x{mask.shape[0]}, the frames "
                              f"are {width}x{height}")
-        return mask > 127
+        return PackedMask(mask > 127) if packed else mask > 127
 
     masks = [load(folder / (Path(name).stem + ".png"), "mask") for name in names]
     junction_paths = [junction_folder / (Path(name).stem + ".png") for name in names]
@@ -166,12 +172,12 @@ def measure_radius(points, views, *, junction_margin=1.0):
     points = np.concatenate(lines)
     samples = []
     for view in views:
-        camera = view.camera
-        if not view.mask.any():
+        camera, mask = view.camera, unpacked(view.mask)
+        if not mask.any():
             continue
-        width = cable_width(view.mask)
+        width = cable_width(mask)
         grow = max(int(round(junction_margin * width)), 1)
-        near_junction = cv2.dilate(view.junctions.view(np.uint8),
+        near_junction = cv2.dilate(unpacked(view.junctions).view(np.uint8),
                                    np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)) > 0
         pixels, depth = camera.project(points)
         ahead, _ = camera.project(points + tangents)
@@ -180,7 +186,7 @@ def measure_radius(points, views, *, junction_margin=1.0):
             inside = ((depth > 0) & (col >= 0) & (row >= 0) & (col < camera.width)
                       & (row < camera.height))
         rows, cols = row[inside].astype(int), col[inside].astype(int)
-        usable = np.flatnonzero(inside)[view.mask[rows, cols] & ~near_junction[rows, cols]]
+        usable = np.flatnonzero(inside)[mask[rows, cols] & ~near_junction[rows, cols]]
         along = ahead[usable] - pixels[usable]
         length = np.linalg.norm(along, axis=1)
         usable, along = usable[length > 1e-9], along[length > 1e-9] / length[length > 1e-9,
@@ -193,7 +199,7 @@ def measure_radius(points, views, *, junction_margin=1.0):
         c, r = np.floor(trace[..., 0]).astype(int), np.floor(trace[..., 1]).astype(int)
         on_frame = (c >= 0) & (r >= 0) & (c < camera.width) & (r < camera.height)
         on = np.zeros(c.shape, dtype=bool)
-        on[on_frame] = view.mask[r[on_frame], c[on_frame]]
+        on[on_frame] = mask[r[on_frame], c[on_frame]]
         middle = len(steps) // 2
         # the run through the point: the first sample off the cable on either side
         after = np.argmin(on[:, middle:], axis=1)
@@ -241,8 +247,8 @@ def _segment(sequence, colour, settings, stage, cancel):
         check_cancel(cancel, "the reconstruction")
         segmentation = segment_frame(sequence.read(number), colour, settings.segmentation,
                                      model=model)
-        masks.append(segmentation.mask)
-        junctions.append(segmentation.junctions)
+        masks.append(PackedMask(segmentation.mask))
+        junctions.append(PackedMask(segmentation.junctions))
         stage((number + 1) / len(sequence), "masks")
     return colour, masks, junctions
 
@@ -520,9 +526,10 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         stage = clock.stage("masks")
         if masks is not None:
             frame_masks, frame_junctions = read_masks(masks, sequence.names, sequence.width,
-                                                      sequence.height)
+                                                      sequence.height, packed=True)
             if frame_junctions is None:
-                frame_junctions = [junction_map(m, cable_width(m), settings.segmentation)
+                frame_junctions = [PackedMask(junction_map(m(), cable_width(m()),
+                                                           settings.segmentation))
                                    for m in frame_masks]
             stage(1.0, "masks")
         else:
@@ -555,10 +562,11 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         reference = min(settings.reference_frame, len(sequence) - 1)
         order = [reference] + [k for k in range(len(sequence)) if k != reference]
         number = next((k for k in order if frame_masks[k].any()), reference)
-        colour_seen = cable_colour(sequence.read(number), frame_masks[number])
+        colour_seen = cable_colour(sequence.read(number), frame_masks[number]())
     stage = clock.stage("fit")
-    evidence = [ImageEvidence.from_mask(view.camera, view.mask, view.junctions,
-                                        settings=settings.fit) for view in views]
+    evidence = [ImageEvidence.from_mask(view.camera, unpacked(view.mask),
+                                        unpacked(view.junctions), settings=settings.fit)
+                for view in views]
     voxels = Voxels.from_grid(grid, agreement=settings.carving.core_agreement)
     state = Reconstruction(
         result=None, views=tuple(views), topology=topology, evidence=tuple(evidence),
@@ -575,7 +583,7 @@ def _agree(views, settings, stage, cancel):
                                 junctions=[view.junctions for view in views],
                                 carving=settings.carving, settings=settings.agreement,
                                 segmentation=settings.segmentation, progress=stage,
-                                cancel=cancel)
+                                cancel=cancel, packed=True)
     log.info(report.summary())
     views = [replace(view, mask=mask, junctions=junctions)
              for view, mask, junctions in zip(views, masks, report.junctions)]

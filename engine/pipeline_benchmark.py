@@ -17,7 +17,7 @@ from .errors import ReconstructionError
 from .ground_truth import read_ground_truth
 from .synthetic_scene import SceneSpec, make_scene, write_scene
 
-__all__ = ["bench_pipeline", "pipeline_suite", "bench_pipeline_looks"]
+__all__ = ["bench_pipeline", "pipeline_suite", "bench_pipeline_looks", "scored_run"]
 
 _STAGE_COLUMNS = ("masks", "cameras", "agreement", "carving", "graph", "topology", "fit")
 
@@ -42,7 +42,7 @@ def pipeline_suite(views=30):
     ]
 
 
-def _run(folder, truth_file, use_true_cameras, masks=None):
+def scored_run(folder, truth_file, use_true_cameras, masks=None):
     """In a fresh process: reconstruct one capture (with ``masks`` if given) and score it.
 
     The process may use at most :data:`MEMORY_LIMIT` bytes: a run past it is a row with its
@@ -122,7 +122,7 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, progress=
                 write_scene(make_scene(spec), folder)
             for use_true, camera_label in runs:
                 row = {"scene": label, "cameras": camera_label}
-                row.update(in_fresh_process(_run, str(folder),
+                row.update(in_fresh_process(scored_run, str(folder),
                                             str(folder / "ground_truth.json"), use_true))
                 rows.append(row)
     if progress is not None:
@@ -196,7 +196,7 @@ def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks
             for masks_label, masks in (("ours", None), ("naive threshold", naive),
                                        ("oracle: exact", folder / "masks")):
                 row = {"looks": family, "set": split, "scene": label, "masks": masks_label}
-                row.update(in_fresh_process(_run, str(folder),
+                row.update(in_fresh_process(scored_run, str(folder),
                                             str(folder / "ground_truth.json"), True,
                                             None if masks is None else str(masks)))
                 rows.append(row)

@@ -12,6 +12,7 @@ from .carving import CarvingSettings
 from .errors import InputError, ReconstructionError
 from .image_sequence import open_image_sequence
 from .mask_agreement import MaskAgreementSettings, agree_masks
+from .packed_mask import PackedMask
 from .pipeline import PipelineSettings, sequence_cameras
 from .progress import StageProgress, check_cancel
 from .segmentation import (SegmentationSettings, reference_frames, segment_frame,
@@ -121,8 +122,8 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         for k, name in enumerate(sequence.names):
             check_cancel(cancel, "segmenting")
             segmentation = segment_frame(sequence.read(k), colour, settings, model=model)
-            frame_masks.append(segmentation.mask)
-            frame_junctions.append(segmentation.junctions)
+            frame_masks.append(PackedMask(segmentation.mask))
+            frame_junctions.append(PackedMask(segmentation.junctions))
             widths.append(segmentation.width)
             stage(share * (k + 1) / len(sequence), f"segment {name}")
         empty = [name for name, mask in zip(sequence.names, frame_masks) if not mask.any()]
@@ -138,12 +139,11 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         thumbnails = []
         for k, name in enumerate(sequence.names):
             stem = Path(name).stem + ".png"
-            cv2.imwrite(str(masks / stem), frame_masks[k].astype(np.uint8) * 255)
-            cv2.imwrite(str(junctions / stem), frame_junctions[k].astype(np.uint8) * 255)
-            changes = ((segmented[k] & ~frame_masks[k], frame_masks[k] & ~segmented[k])
-                       if agree else (None, None))
-            thumbnails.append(_overlay(sequence.read(k), frame_masks[k], frame_junctions[k],
-                                       *changes))
+            mask, junction, before = frame_masks[k](), frame_junctions[k](), segmented[k]()
+            cv2.imwrite(str(masks / stem), mask.astype(np.uint8) * 255)
+            cv2.imwrite(str(junctions / stem), junction.astype(np.uint8) * 255)
+            changes = (before & ~mask, mask & ~before) if agree else (None, None)
+            thumbnails.append(_overlay(sequence.read(k), mask, junction, *changes))
         sheet = contact_sheet(thumbnails)
         cv2.imwrite(str(output / "contact_sheet.png"), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
         stage(1.0, "masks written")
@@ -168,12 +168,16 @@ def _agreed(sequence, masks, junctions, cameras, settings, stage, cancel):
         log.warning("warning: %s", warning)
     index = {name: k for k, name in enumerate(sequence.names)}
     numbers = [index[camera.name] for camera in found]
-    agreed, report = agree_masks(found, [masks[k] for k in numbers],
-                                 junctions=[junctions[k] for k in numbers],
-                                 carving=settings.carving, settings=settings.agreement,
-                                 segmentation=settings.segmentation,
-                                 progress=stage.part(0.8 if cameras is None else 0.05, 1.0),
-                                 cancel=cancel)
+    try:
+        agreed, report = agree_masks(found, [masks[k] for k in numbers],
+                                     junctions=[junctions[k] for k in numbers],
+                                     carving=settings.carving, settings=settings.agreement,
+                                     segmentation=settings.segmentation,
+                                     progress=stage.part(0.8 if cameras is None else 0.05, 1.0),
+                                     cancel=cancel, packed=True)
+    except ReconstructionError as error:  # the carve is over its memory budget
+        log.warning("warning: masks written as segmented, not agreed across views: %s", error)
+        return masks, junctions
     log.info(report.summary())
     if report.left_alone:
         log.warning("warning: the masks of %d frame(s) disagree with the other views and were "

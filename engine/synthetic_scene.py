@@ -28,7 +28,7 @@ from .synthetic_looks import DEFAULT_LOOK, ClutterObject, Look, sample_look
 from .synthetic_render import render_views
 
 __all__ = ["SceneSpec", "SyntheticScene", "make_scene", "write_scene", "look_spec", "look_scene",
-           "lift_truth", "read_look", "MIN_CABLE_PIXELS"]
+           "lift_truth", "read_look", "render_scene_to", "MIN_CABLE_PIXELS"]
 
 #: Nothing can be reconstructed from a thinner wire; scenes are always at least this wide.
 MIN_CABLE_PIXELS = 5.0
@@ -146,8 +146,21 @@ def make_scene(spec, *, texture=None):
     ValueError
         The cable would be thinner than :data:`MIN_CABLE_PIXELS` in some view.
     """
-    if not 10 <= spec.views <= 60:
-        raise ValueError("views must be between 10 and 60")
+    truth = _framed_truth(spec)
+    images, masks, encoded = [], [], []
+    for image, mask, data in render_views(truth, truth.cameras, spec.look, texture=texture,
+                                          encoded=True):
+        images.append(image)
+        masks.append(mask)
+        encoded.append(data)
+    return SyntheticScene(spec=spec, truth=truth, images=tuple(images), masks=tuple(masks),
+                          encoded=tuple(encoded) if spec.look.jpeg_quality < 100 else ())
+
+
+def _framed_truth(spec):
+    """The spec's ground truth, lifted by its look, with the cameras of its rig."""
+    if not 3 <= spec.views <= 400:
+        raise ValueError("views must be between 3 and 400")
     truth = lift_truth(spec.layout(), spec.look.lift)
     rig = {"orbit": orbit_cameras, "handheld": handheld_cameras}[spec.rig]
     low_views = (30.0, 60.0) if spec.kind == "hanging" else (45.0, 75.0)
@@ -158,15 +171,7 @@ def make_scene(spec, *, texture=None):
     if width < MIN_CABLE_PIXELS:
         raise ValueError(f"the cable would be only {width:.1f} pixels wide: use a larger "
                          "radius, a smaller extent or larger images")
-    truth = truth.with_cameras(cameras)
-    images, masks, encoded = [], [], []
-    for image, mask, data in render_views(truth, cameras, spec.look, texture=texture,
-                                          encoded=True):
-        images.append(image)
-        masks.append(mask)
-        encoded.append(data)
-    return SyntheticScene(spec=spec, truth=truth, images=tuple(images), masks=tuple(masks),
-                          encoded=tuple(encoded) if spec.look.jpeg_quality < 100 else ())
+    return truth.with_cameras(cameras)
 
 
 def look_spec(family, seed, *, kind="table", crossings=3, views=24, width=640, height=480,
@@ -226,28 +231,63 @@ def write_scene(scene, folder, *, overwrite=False, jpeg_quality=92):
     -------
     pathlib.Path
     """
+    folder = _scene_folder(folder, overwrite)
+    encoded = scene.encoded or (None,) * len(scene.images)
+    for camera, image, mask, data in zip(scene.cameras, scene.images, scene.masks, encoded):
+        _write_view(folder, camera, image, mask, data, jpeg_quality)
+    return _write_truth(folder, scene.truth, scene.spec.look, overwrite)
+
+
+def render_scene_to(spec, folder, *, overwrite=False):
+    """Render a scene and write it view by view, as :func:`write_scene` lays it out, holding
+    one view at a time (for captures too large to keep in memory: 200 views of 4K are 5 GB).
+
+    Parameters
+    ----------
+    spec : SceneSpec
+    folder : str or os.PathLike
+    overwrite : bool, optional
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    folder = _scene_folder(folder, overwrite)
+    truth = _framed_truth(spec)
+    for camera, (image, mask, data) in zip(truth.cameras, render_views(
+            truth, truth.cameras, spec.look, encoded=True)):
+        _write_view(folder, camera, image, mask, data, 92)
+    return _write_truth(folder, truth, spec.look, overwrite)
+
+
+def _scene_folder(folder, overwrite):
     folder = Path(folder)
-    truth_path = folder / "ground_truth.json"
-    if truth_path.exists() and not overwrite:
+    if (folder / "ground_truth.json").exists() and not overwrite:
         raise FileExistsError(f"{folder} already holds a scene (pass overwrite to replace it)")
     (folder / "images").mkdir(parents=True, exist_ok=True)
     (folder / "masks").mkdir(exist_ok=True)
-    encoded = scene.encoded or (None,) * len(scene.images)
-    for camera, image, mask, data in zip(scene.cameras, scene.images, scene.masks, encoded):
-        path = folder / "images" / camera.name
-        if data is not None and camera.name.endswith(".jpg"):
-            path.write_bytes(data)
-        else:
-            bgr = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
-            options = [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if camera.name.endswith(".jpg") \
-                else []
-            cv2.imwrite(str(path), bgr, options)
-        cv2.imwrite(str(folder / "masks" / (Path(camera.name).stem + ".png")),
-                    mask.astype(np.uint8) * 255)
-    write_colmap_model(folder / "sparse", scene.cameras, overwrite=overwrite)
-    write_ground_truth(scene.truth, truth_path, overwrite=overwrite)
+    return folder
+
+
+def _write_view(folder, camera, image, mask, data, jpeg_quality):
+    path = folder / "images" / camera.name
+    if data is not None and camera.name.endswith(".jpg"):
+        path.write_bytes(data)
+    else:
+        bgr = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        options = [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if camera.name.endswith(".jpg") \
+            else []
+        cv2.imwrite(str(path), bgr, options)
+    cv2.imwrite(str(folder / "masks" / (Path(camera.name).stem + ".png")),
+                mask.astype(np.uint8) * 255)
+
+
+def _write_truth(folder, truth, look, overwrite):
+    """The scene's COLMAP model of the true cameras, ground truth and look."""
+    write_colmap_model(folder / "sparse", truth.cameras, overwrite=overwrite)
+    write_ground_truth(truth, folder / "ground_truth.json", overwrite=overwrite)
     (folder / "look.json").write_text(
-        json.dumps(dataclasses.asdict(scene.spec.look), indent=1) + "\n", encoding="utf-8")
+        json.dumps(dataclasses.asdict(look), indent=1) + "\n", encoding="utf-8")
     return folder
 
 

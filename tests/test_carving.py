@@ -142,3 +142,24 @@ def test_masks_that_take_in_everything_stop_at_the_memory_budget(scene):
     grid = carve(scene.cameras, scene.masks, radius=scene.truth.radius,
                  settings=CarvingSettings(memory_mb=200))
     assert grid.occupied.any()
+
+
+def test_a_packed_mask_gives_back_the_mask_in_an_eighth_of_the_memory():
+    from engine.packed_mask import PackedMask, unpacked
+
+    rng = np.random.default_rng(0)
+    for shape in [(7, 13), (480, 640), (1, 1)]:
+        mask = rng.random(shape) < 0.3
+        packed = PackedMask(mask)
+        again = packed()
+        assert again.dtype == bool and again.shape == shape
+        np.testing.assert_array_equal(again, mask)
+        assert packed.count == mask.sum() and packed.any() == mask.any()
+        assert packed.nbytes == -(-mask.size // 8)
+        np.testing.assert_array_equal(unpacked(packed), mask)
+    assert not PackedMask(np.zeros((5, 5), bool)).any()
+    assert unpacked(None) is None
+    again[0, 0] = not again[0, 0]  # a caller's array is its own
+    np.testing.assert_array_equal(packed(), mask)
+    with pytest.raises(ValueError, match="2-D"):
+        PackedMask(np.zeros((2, 2, 2), bool))

@@ -16,7 +16,7 @@ from engine.synthetic_cameras import cable_pixel_width, handheld_cameras, orbit_
 from engine.synthetic_layouts import (LayoutSettings, find_crossings_2d, hanging_layout,
                                       knot_layout, table_layout)
 from engine.synthetic_render import render_masks
-from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+from engine.synthetic_scene import SceneSpec, make_scene, render_scene_to, write_scene
 
 RULES = LayoutSettings()
 
@@ -200,6 +200,21 @@ def test_written_scene_round_trips(tmp_path):
     assert json.loads((folder / "ground_truth.json").read_text())["kind"] == "knot"
     with pytest.raises(FileExistsError):
         write_scene(scene, folder)
+
+
+def test_a_scene_written_view_by_view_is_the_same_scene(tmp_path):
+    spec = SceneSpec(crossings=2, views=3, width=480, height=360, image_format="jpg")
+    held = write_scene(make_scene(spec), tmp_path / "held")
+    streamed = render_scene_to(spec, tmp_path / "streamed")
+    files = sorted(p.relative_to(held) for p in held.rglob("*") if p.is_file())
+    assert len(files) == 2 * 3 + 2 + 5  # images, masks, truth, look, the model (COLMAP, text)
+    assert files == sorted(p.relative_to(streamed) for p in streamed.rglob("*") if p.is_file())
+    for name in files:
+        assert (held / name).read_bytes() == (streamed / name).read_bytes(), name
+    with pytest.raises(FileExistsError):
+        render_scene_to(spec, streamed)
+    with pytest.raises(ValueError, match="between 3 and 400"):
+        make_scene(SceneSpec(views=2))
 
 
 def test_metrics_score_the_truth_of_every_kind_as_perfect():
