@@ -14,7 +14,8 @@ import bpy
 from ..engine.bezier import BezierSettings
 from ..engine.cli import (EXIT_BAD_INPUT, ProgressBar, add_reconstruct_arguments,
                           reconstruct_arguments, run_with_exit_code)
-from ..engine.errors import InputError
+from ..engine.errors import InputError, OutputError
+from ..engine.files import check_writable
 from ..engine.settings_cli import add_settings_arguments, settings_from_arguments
 from .reconstruction import RunRequest, apply_outcome, reconstruct_work, sequence_name
 
@@ -50,8 +51,7 @@ def _reconstruct(args):
         raise InputError(f"{args.output}: the output must be a .blend file")
     if output.exists() and not args.overwrite:
         raise InputError(f"{args.output} exists (use --overwrite to replace it)")
-    if not output.parent.is_dir():
-        raise InputError(f"{output.parent} is not a folder")
+    check_writable(output.parent)  # before the work, not when the .blend is saved
     engine = reconstruct_arguments(args)
     images = str(Path(engine["images"]).resolve())
     request = RunRequest(
@@ -62,7 +62,11 @@ def _reconstruct(args):
     progress = (lambda fraction, message: None) if args.quiet else ProgressBar()
     outcome = reconstruct_work(request)(progress, None)
     obj = apply_outcome(bpy.context, request, outcome)
-    bpy.ops.wm.save_as_mainfile(filepath=str(output), check_existing=False, copy=True)
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=str(output), check_existing=False, copy=True)
+    except RuntimeError as error:  # a full disk: Blender's report, first line
+        raise OutputError(f"cannot write {output}: {str(error).strip().splitlines()[0]}") \
+            from None
     result = outcome.state.result
     for warning in outcome.warnings:
         print(f"warning: {warning}", file=sys.stderr)

@@ -6,7 +6,7 @@ the command line (``python -m engine``), in a pipeline, or inside the Blender ex
 
 from .camera import CAMERA_MODELS, Camera
 from .colmap_model import ColmapModel, read_colmap_model, write_colmap_model
-from .errors import Cancelled, InputError, ReconstructionError
+from .errors import Cancelled, InputError, OutputError, ReconstructionError
 from .ground_truth import GroundTruth, TrueCrossing, read_ground_truth, write_ground_truth
 from .result import (RESULT_FORMAT, CablePath, Crossing, Result, StrandRef, read_result,
                      write_result)
@@ -34,7 +34,8 @@ _LAZY = {
 
 __all__ = [
     "__version__", "CAMERA_MODELS", "Camera", "ColmapModel", "read_colmap_model",
-    "write_colmap_model", "Cancelled", "InputError", "ReconstructionError", "RESULT_FORMAT",
+    "write_colmap_model", "Cancelled", "InputError", "OutputError", "ReconstructionError",
+    "RESULT_FORMAT",
     "CablePath", "Crossing", "Result", "StrandRef", "read_result", "write_result",
     "GroundTruth", "TrueCrossing", "read_ground_truth", "write_ground_truth", *_LAZY,
 ]

@@ -36,7 +36,8 @@ import numpy as np
 
 from .camera import CAMERA_MODELS, Camera
 from .colmap_model import natural_key, write_colmap_model
-from .errors import Cancelled, InputError, ReconstructionError
+from .errors import Cancelled, InputError, OutputError, ReconstructionError
+from .files import check_writable
 from .progress import StageProgress, check_cancel
 from .image_sequence import open_image_sequence
 from .metrics import Similarity
@@ -577,7 +578,8 @@ def cameras_command(images_dir, output_dir, *, overwrite=False, progress=None,
     ------
     InputError
         The folder is missing or holds no images, or ``output_dir`` already holds a model and
-        ``overwrite`` is off (checked before any work).
+        ``overwrite`` is off, or cannot be written (:class:`.OutputError`; checked before
+        any work).
     ReconstructionError
         Too few frames registered.
     """
@@ -585,6 +587,7 @@ def cameras_command(images_dir, output_dir, *, overwrite=False, progress=None,
     if not overwrite and any((output / f"{stem}{suffix}").is_file()
                              for stem in ("cameras", "images") for suffix in (".txt", ".bin")):
         raise InputError(f"{output} already holds a COLMAP model (use --overwrite to replace it)")
+    check_writable(output, created=True)
     with open_image_sequence(images_dir) as sequence:
         estimate = estimate_cameras(list(sequence.paths), settings=settings,
                                     focal_length_px=sequence.focal_length_px,
@@ -593,6 +596,9 @@ def cameras_command(images_dir, output_dir, *, overwrite=False, progress=None,
         write_colmap_model(output, estimate.cameras, points=estimate.points, overwrite=overwrite)
     except FileExistsError as error:
         raise InputError(str(error)) from None
+    except OSError as error:  # a full disk
+        raise OutputError(f"cannot write the model in {output}: {error.strerror or error}") \
+            from None
     return estimate
 
 

@@ -135,6 +135,7 @@ def reconstruct_arguments(args):
 def _run_reconstruct(args):
     from pathlib import Path
 
+    from .files import check_writable
     from .obj_export import write_obj
     from .pipeline import reconstruct
     from .result import write_result
@@ -143,8 +144,8 @@ def _run_reconstruct(args):
     for path in (output, Path(args.obj) if args.obj else None):
         if path is not None and path.exists() and not args.overwrite:
             raise InputError(f"{path} exists (use --overwrite to replace it)")
-        if path is not None and not path.resolve().parent.is_dir():
-            raise InputError(f"{path.parent} is not a folder")
+        if path is not None:  # before the work, not when its result is written
+            check_writable(path.resolve().parent)
     result = reconstruct(**reconstruct_arguments(args),
                          progress=None if args.quiet else ProgressBar())
     write_result(result, output, overwrite=args.overwrite)

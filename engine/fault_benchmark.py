@@ -4,10 +4,17 @@ command does with it (``python -m engine bench faults``).
 Each fault is built from one small synthetic capture (10 views at 480x360 of a 2-crossing
 cable, true cameras in ``sparse/``) and run as a user runs it, in a subprocess: the exit code,
 the first line on stderr, whether a traceback or an internal error (exit 4) showed, and
-whether anything was written or changed that should not have been.
+whether anything was written or changed that should not have been. Some faults are in the
+run rather than its input: an output one may not write, a full disk (a file size limit), and
+Ctrl-C pressed in each stage (exit 130, nothing written).
 """
 
+import dataclasses
+import os
+import re
+import resource
 import shutil
+import signal
 import struct
 import subprocess
 import sys
@@ -68,6 +75,38 @@ def with_exif_orientation(data, orientation=6):
 def _rotated_by_exif(folder):
     for path in _frames(folder):
         path.write_bytes(with_exif_orientation(path.read_bytes()))
+
+
+def _to_cmyk(folder):
+    """Every frame re-saved as a CMYK JPEG (as print workflows and some scanners write them)."""
+    from PIL import Image
+
+    for path in _frames(folder):
+        with Image.open(path) as image:
+            image.convert("CMYK").save(path, quality=95)
+
+
+def _recropped(folder, width, height, scale):
+    """Every frame scaled by ``scale`` and cropped about its centre to ``width`` x ``height``,
+    the model's cameras with it (a larger ``width`` makes huge frames, a smaller crop cuts
+    the cable off at the frame's edges in every view)."""
+    from .colmap_model import read_colmap_model, write_colmap_model
+
+    model = read_colmap_model(folder / "sparse")
+    cameras = []
+    for camera in model.cameras:
+        left = (camera.width * scale - width) / 2
+        top = (camera.height * scale - height) / 2
+        fx, fy, cx, cy = camera.params
+        cameras.append(dataclasses.replace(camera, width=width, height=height, params=np.array(
+            [fx * scale, fy * scale, cx * scale - left, cy * scale - top])))
+        path = folder / "images" / camera.name
+        if path.is_file():  # (the model may name more frames than are kept)
+            image = cv2.imread(str(path))
+            image = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
+            cv2.imwrite(str(path), image[int(top):int(top) + height, int(left):int(left) + width])
+    shutil.rmtree(folder / "sparse")
+    write_colmap_model(folder / "sparse", cameras)
 
 
 def _truncate(path):
@@ -133,6 +172,26 @@ def _half_the_images(text):
                      if k in keep or line.startswith("#") or not line) + "\n"
 
 
+#: An "argument" that runs the command with a file size limit of 1 kB (the result does not fit).
+_FILE_SIZE_LIMIT = "<file size limit>"
+
+
+@dataclasses.dataclass(frozen=True)
+class _CtrlC:
+    """An "argument" that presses Ctrl-C (SIGINT) once these progress messages showed, in
+    this order."""
+
+    after: tuple
+
+
+#: Where Ctrl-C is pressed for each stage (the carving's first messages are the agreement's).
+_STAGE_MESSAGES = [("the masks", ("% masks",)), ("the cameras", ("% cameras",)),
+                   ("the mask agreement", ("agreeing masks",)),
+                   ("the carving", ("masks agreed", "% carving")),
+                   ("the segment graph", ("grow fronts",)), ("the topology", ("branches",)),
+                   ("the final fit", ("rod: iteration",))]
+
+
 #: ``(name, prepare(folder) -> (images, extra arguments), expected exit codes)``; ``folder`` is a
 #: fresh copy of the clean capture. Outputs go to ``folder / "out"`` unless the fault names one.
 FAULTS = [
@@ -162,6 +221,11 @@ FAULTS = [
         i, cv2.COLOR_BGR2BGRA)) or f / "images", []), (0,)),
     ("16-bit PNG frames", lambda f: (_to_png(f, lambda i: i.astype(np.uint16) * 257)
                                      or f / "images", []), (0,)),
+    ("CMYK JPEG frames", lambda f: (_to_cmyk(f) or f / "images", []), (0,)),
+    ("huge frames (8K: 7680x4320)", lambda f: (_recropped(f, 7680, 4320, 16.0)
+                                                or f / "images", []), (0,)),
+    ("the cable leaving the frame in every view (the middle 60% kept)", lambda f: (
+        _recropped(f, 288, 216, 1.0) or f / "images", []), (0, 3)),
     ("tiny frames (64x48), cameras estimated", lambda f: (
         _replace_frames(f, lambda i: cv2.resize(i, (64, 48))) or shutil.rmtree(f / "sparse")
         or f / "images", []), (2, 3)),
@@ -185,7 +249,12 @@ FAULTS = [
         f / "images", ["-o", f / "nowhere" / "result.json"]), (2,)),
     ("an output that is a folder", lambda f: (
         (f / "taken").mkdir() or f / "images", ["-o", f / "taken"]), (2,)),
-]
+    ("an output folder that may not be written in (/sys)", lambda f: (
+        f / "images", ["-o", "/sys/result.json"]), (2,)),
+    ("a full disk (a file size limit: no room for the result)", lambda f: (
+        f / "images", [_FILE_SIZE_LIMIT]), (2,)),
+] + [(f"Ctrl-C during {stage}", lambda f, after=after: (f / "images", [_CtrlC(after)]), (130,))
+     for stage, after in _STAGE_MESSAGES]
 
 
 def _snapshot(folder):
@@ -198,7 +267,9 @@ def _run_fault(name, prepare, expected, clean, work):
     folder = work / "capture"
     shutil.copytree(clean, folder)
     images, extra = prepare(folder)
-    extra = [str(value) for value in extra]
+    size_limit = _FILE_SIZE_LIMIT in extra
+    interrupt = next((value for value in extra if isinstance(value, _CtrlC)), None)
+    extra = [str(value) for value in extra if value != _FILE_SIZE_LIMIT and value is not interrupt]
     if "--cameras" not in extra and (folder / "sparse").is_dir():
         extra = ["--cameras", str(folder / "sparse")] + extra
     if "-o" not in extra:
@@ -206,26 +277,51 @@ def _run_fault(name, prepare, expected, clean, work):
         extra += ["-o", str(folder / "out" / "result.json")]
     before = _snapshot(folder)
     started = time.perf_counter()
-    run = subprocess.run([sys.executable, "-m", "engine", "-q", "reconstruct", str(images),
-                          *extra], capture_output=True, text=True, timeout=600,
-                         cwd=Path(__file__).resolve().parents[1])
+    command = [sys.executable, "-m", "engine"] + ([] if interrupt else ["-q"]) + [
+        "reconstruct", str(images), *extra]
+    returncode, stderr = _run_command(command, interrupt, size_limit)
     seconds = time.perf_counter() - started
     after = _snapshot(folder)
     changed = sorted(str(path.relative_to(folder)) for path in before
                      if after.get(path) != before[path])
     added = sorted(str(path.relative_to(folder)) for path in after if path not in before)
-    lines = [line for line in run.stderr.splitlines() if line.strip()]
-    message = next((line for line in lines if not line.startswith("warning:")), "")
-    traceback = "Traceback" in run.stderr or run.returncode == 4
-    untouched = not changed and (run.returncode == 0 or not added)
+    lines = [line for line in re.split(r"[\r\n]", stderr) if line.strip()
+             and not line.startswith("[")]  # (the progress bar's lines)
+    message = next((line for line in (reversed(lines) if interrupt else lines)
+                    if not line.startswith("warning:")), "")
+    traceback = "Traceback" in stderr or returncode == 4
+    untouched = not changed and (returncode == 0 or not added)
     shutil.rmtree(folder, ignore_errors=True)
-    return {"fault": name, "exit": run.returncode,
+    return {"fault": name, "exit": returncode,
             "expected": "/".join(map(str, expected)),
-            "ok": "yes" if run.returncode in expected and not traceback and untouched else "NO",
+            "ok": "yes" if returncode in expected and not traceback and untouched else "NO",
             "traceback": "yes" if traceback else "no",
             "nothing_changed": "yes" if untouched else f"no: {', '.join(changed + added)[:60]}",
             "message": message.replace(str(work), "…")[:110].replace("|", "/"),
             "seconds": round(seconds, 1)}
+
+
+def _run_command(command, interrupt, size_limit):
+    """Run ``command`` (pressing Ctrl-C as ``interrupt`` says, under a file size limit if
+    asked); its exit code and stderr."""
+    def limit():
+        if size_limit:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (1024, 1024))
+
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                               cwd=Path(__file__).resolve().parents[1], preexec_fn=limit)
+    stderr, waiting, seen = b"", [m.encode() for m in interrupt.after] if interrupt else [], 0
+    deadline = time.monotonic() + 600
+    while chunk := os.read(process.stderr.fileno(), 1 << 16):
+        stderr += chunk
+        while waiting and (found := stderr.find(waiting[0], seen)) >= 0:
+            seen = found + len(waiting.pop(0))  # the next message is looked for after it
+            if not waiting:
+                process.send_signal(signal.SIGINT)
+        if time.monotonic() > deadline:
+            process.kill()
+    process.stderr.close()
+    return process.wait(), stderr.decode(errors="replace")
 
 
 def bench_faults(*, progress=None):

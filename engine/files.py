@@ -4,7 +4,39 @@ import os
 import secrets
 from pathlib import Path
 
-__all__ = ["write_atomic"]
+import cv2
+
+from .errors import OutputError
+
+__all__ = ["write_atomic", "write_image", "check_writable"]
+
+
+def check_writable(folder, *, created=False):
+    """Check that files can be created in ``folder`` (a probe file is made and removed), so
+    a long run does not fail only when it writes its result.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+    created : bool, optional
+        ``folder`` is made by the writer if missing: its nearest existing parent is probed.
+
+    Raises
+    ------
+    OutputError
+        ``folder`` is missing (and not ``created``), not a folder, or may not be written in.
+    """
+    folder = Path(folder).resolve()
+    while created and not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise OutputError(f"{folder} is not a folder")
+    probe = folder / f".cable_recon-probe-{secrets.token_hex(6)}"
+    try:
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except OSError as error:
+        raise OutputError(f"cannot write in {folder}: {error.strerror or error}") from None
+    os.unlink(probe)
 
 
 def write_atomic(path, data, *, overwrite=False):
@@ -33,6 +65,9 @@ def write_atomic(path, data, *, overwrite=False):
         ``path`` exists and ``overwrite`` is false.
     FileNotFoundError
         The destination folder does not exist.
+    OutputError
+        The file cannot be written (a folder one may not write in, a full disk); nothing is
+        left behind.
     """
     path = Path(path)
     if isinstance(data, str):
@@ -42,6 +77,18 @@ def write_atomic(path, data, *, overwrite=False):
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise FileNotFoundError(f"folder {folder} does not exist")
+    try:
+        _write_through_temporary(path, folder, data, overwrite)
+    except FileExistsError:
+        raise
+    except OSError as error:
+        raise OutputError(f"cannot write {path}: {error.strerror or error}") from None
+    return path
+
+
+def _write_through_temporary(path, folder, data, overwrite):
+    """``data`` into a new file in ``folder``, then moved to ``path`` (the temporary file is
+    removed whatever happens)."""
     # os.open with mode 0o666 lets the umask decide the permissions, as for any new file
     # (tempfile.mkstemp would leave the output readable by its owner only).
     while True:
@@ -73,4 +120,26 @@ def write_atomic(path, data, *, overwrite=False):
     finally:
         if os.path.exists(tmp_name):
             os.unlink(tmp_name)
-    return path
+
+
+def write_image(path, image, *, overwrite=False):
+    """Write an image file (its format from the suffix) as :func:`write_atomic` does.
+
+    ``cv2.imwrite`` only returns False when it cannot write; this raises.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    image : ndarray
+        As ``cv2.imwrite`` takes it (BGR, or one channel).
+    overwrite : bool, optional
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    path = Path(path)
+    ok, data = cv2.imencode(path.suffix, image)
+    if not ok:
+        raise ValueError(f"cannot encode an image as {path.suffix!r}")
+    return write_atomic(path, data.tobytes(), overwrite=overwrite)

@@ -10,6 +10,7 @@ import numpy as np
 from .camera_estimation import CameraEstimationSettings
 from .carving import CarvingSettings
 from .errors import InputError, ReconstructionError
+from .files import check_writable, write_image
 from .image_sequence import open_image_sequence
 from .mask_agreement import MaskAgreementSettings, agree_masks
 from .packed_mask import PackedMask
@@ -95,7 +96,8 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
     ------
     InputError
         Bad input (a model with no camera named after a frame), existing output without
-        ``overwrite``, or a frame with no cable pixels (the masks are written as segmented,
+        ``overwrite``, an output folder that cannot be written (:class:`.OutputError`), or
+        a frame with no cable pixels (the masks are written as segmented,
         with no agreement, to show it).
     Cancelled
     """
@@ -105,6 +107,7 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         raise InputError(f"{masks} already holds masks (pass --overwrite to replace them)")
     if agreement.rounds > 0 and isinstance(cameras, (str, Path)) and not Path(cameras).is_dir():
         raise InputError(f"--cameras {cameras}: not a folder")  # before segmenting
+    check_writable(output, created=True)
     stage = StageProgress(progress)
     with open_image_sequence(images) as sequence:
         if not 0 <= reference_frame < len(sequence):
@@ -140,12 +143,13 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         for k, name in enumerate(sequence.names):
             stem = Path(name).stem + ".png"
             mask, junction, before = frame_masks[k](), frame_junctions[k](), segmented[k]()
-            cv2.imwrite(str(masks / stem), mask.astype(np.uint8) * 255)
-            cv2.imwrite(str(junctions / stem), junction.astype(np.uint8) * 255)
+            write_image(masks / stem, mask.astype(np.uint8) * 255, overwrite=True)
+            write_image(junctions / stem, junction.astype(np.uint8) * 255, overwrite=True)
             changes = (before & ~mask, mask & ~before) if agree else (None, None)
             thumbnails.append(_overlay(sequence.read(k), mask, junction, *changes))
         sheet = contact_sheet(thumbnails)
-        cv2.imwrite(str(output / "contact_sheet.png"), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+        write_image(output / "contact_sheet.png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR),
+                    overwrite=True)
         stage(1.0, "masks written")
     if empty:
         shown = ", ".join(empty[:5]) + (f" and {len(empty) - 5} more" if len(empty) > 5 else "")

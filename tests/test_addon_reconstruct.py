@@ -243,6 +243,47 @@ def test_modal_run_cancels_at_once_and_leaves_the_scene(empty_scene, capture):
     assert len(bpy.data.objects) == 0
 
 
+#: Progress messages (in order) that show each stage is running (the carving's first ones are
+#: the mask agreement's).
+STAGE_MESSAGES = {"masks": ("masks",), "cameras": ("cameras",), "agreement": ("agreeing masks",),
+                  "carving": ("masks agreed", "carving"), "graph": ("grow fronts",),
+                  "topology": ("branches",), "fit": ("rod: iteration",), "curve": ("curve",)}
+
+
+@pytest.mark.parametrize("stage", list(STAGE_MESSAGES))
+def test_esc_in_any_stage_leaves_the_scene_as_it_was(empty_scene, capture, stage):
+    from cable_reconstruction.addon.background_job import BackgroundJob, ModalRun
+    from cable_reconstruction.addon.reconstruction import reconstruct_work, request_from_scene
+    from cable_reconstruction.engine import Cancelled
+
+    configure(empty_scene, capture)
+    bpy.ops.mesh.primitive_cube_add()  # the user's own scene
+    before = {kind: sorted(block.name for block in getattr(bpy.data, kind))
+              for kind in ("objects", "curves", "cameras", "collections", "materials")}
+    request = request_from_scene(empty_scene)
+    waiting, reached, escaped = list(STAGE_MESSAGES[stage]), threading.Event(), threading.Event()
+
+    def work(progress, cancel):
+        def watched(fraction, message):
+            progress(fraction, message)
+            if waiting and waiting[0] in message:
+                waiting.pop(0)
+                if not waiting:  # hold the stage until Esc was pressed
+                    reached.set()
+                    escaped.wait(30)
+        return reconstruct_work(request)(watched, cancel)
+
+    run = ModalRun(BackgroundJob(work, cancelled_errors=(Cancelled,)), title="Reconstructing")
+    run.start()
+    assert reached.wait(120), f"the {stage} stage never showed"
+    assert run.on_escape().action == "CANCELLED"
+    escaped.set()
+    assert run.job.wait(60)
+    assert run.job.poll().state == "CANCELLED"
+    assert {kind: sorted(block.name for block in getattr(bpy.data, kind))
+            for kind in before} == before
+
+
 def test_modal_run_reports_progress_and_failures():
     from cable_reconstruction.addon.background_job import BackgroundJob, ModalRun
 
@@ -283,6 +324,16 @@ def test_modal_run_reports_progress_and_failures():
 
     status = BackgroundJob(bug).run_here()
     assert status.state == "FAILED" and status.error == "KeyError: 'oops'"
+
+
+def test_batch_command_names_an_output_it_cannot_write_before_the_work(addon, capture,
+                                                                      capsys):
+    from cable_reconstruction.addon.batch_command import handle_command
+
+    code = handle_command(["reconstruct", str(capture / "images"), "--cameras",
+                           str(capture / "sparse"), "-o", "/sys/twist.blend", "-q"])
+    assert code == 2
+    assert capsys.readouterr().err.strip() == "error: cannot write in /sys: Permission denied"
 
 
 def test_batch_command_writes_a_blend_that_reopens_with_the_curve(addon, capture, tmp_path,

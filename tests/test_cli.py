@@ -52,3 +52,39 @@ def test_a_bug_is_one_line_naming_where_with_the_traceback_in_a_file():
     with pytest.raises(AttributeError):  # --debug: the traceback itself
         run_with_exit_code(carve, [not_a_camera], [np.zeros((2, 2), bool)], stream=stream,
                            debug=True)
+
+
+def test_an_output_that_cannot_be_written_is_named_before_the_work(tmp_path):
+    images = tmp_path / "images"
+    images.mkdir()  # (empty: the output is checked first, whatever the input)
+    for command in (["reconstruct", str(images), "-o", "/sys/result.json"],
+                    ["segment", str(images), "-o", "/sys/masks", "--no-agreement"],
+                    ["cameras", str(images), "-o", "/sys/model"]):
+        run = run_engine(*command)
+        assert run.returncode == 2, run.stderr
+        assert run.stderr.strip() == "error: cannot write in /sys: Permission denied"
+
+
+def test_a_full_disk_leaves_nothing_behind(tmp_path, monkeypatch):
+    import errno
+    import os
+
+    import numpy as np
+    import pytest
+
+    from engine.errors import OutputError
+    from engine.files import write_atomic, write_image
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    (tmp_path / "kept.json").write_text("the user's")
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OutputError, match=r"cannot write .*r\.json: No space left on device"):
+        write_atomic(tmp_path / "r.json", "{}")
+    with pytest.raises(OutputError, match="No space left"):
+        write_atomic(tmp_path / "kept.json", "{}", overwrite=True)
+    with pytest.raises(OutputError, match="No space left"):
+        write_image(tmp_path / "m.png", np.zeros((4, 4), np.uint8))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.json"]  # no temporary left
+    assert (tmp_path / "kept.json").read_text() == "the user's"
