@@ -18,10 +18,13 @@ of the region).
 Nothing here depends on the image count or size for memory: masks are read one view at a time
 (arrays or callables that load them), kept bit-packed between levels, and only the voxels of
 the current level are held. The voxels follow the masks, though: masks that take in much of
-the table, or too few views to bound the cable, make billions of them. Before each split and
-before the grid is built, the voxels' memory (and what the stages after carving build on
-them) is checked against a budget (``memory_mb``), and the carve stops with a clear error
-rather than run the machine out of memory.
+the table, or too few views to bound the cable, make billions of them, and the grid the later
+stages work on spans the occupied voxels' box (a thin wire across a large floor: hundreds of
+millions). Before each split and before the grid is built, the voxels' memory (and what the
+stages after carving build on them) is checked against a budget (``memory_mb``); past it, the
+carve starts again in voxels twice as large (down to one per cable radius: the grid's
+``voxel_size`` says so), and past that it stops with a clear error rather than run the
+machine out of memory.
 
 The region comes from the data: the cameras' common look-at point and what they see around it
 at that distance, carved at the coarsest level with the cable's own masks. The fine voxel size
@@ -55,6 +58,9 @@ _CHILDREN = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
 _BATCH = 1 << 17
 #: Bytes a voxel of a level costs while it is voted on (its index, lattice and votes).
 _LEVEL_BYTES = 80
+#: Past the memory budget, the carve is tried again in voxels twice as large while there are
+#: at least this many voxels per cable radius (two across the cable).
+_LEAST_VOXELS_PER_RADIUS = 1.0
 #: Bytes the carved grid and the stages after it (the segment graph's neighbour tables, the
 #: rod fit's voxel points) cost per occupied voxel, and per voxel of the grid's box.
 _OCCUPIED_BYTES, _BOX_BYTES = 256, 12
@@ -95,7 +101,8 @@ class CarvingSettings:
         this many megabytes, and recomputed at each level when not.
     memory_mb : float
         The voxels (while carved, and the grid and what the stages after it build on it) may
-        take this many megabytes: a carve that would need more stops with a
+        take this many megabytes: a carve that would need more starts again in voxels twice
+        as large (at least one per radius), and past that stops with a
         :class:`.ReconstructionError` before it allocates them (masks that take in far more
         than a cable, or too few views to bound it).
     """
@@ -381,7 +388,7 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
     ValueError
         Masks and cameras do not match, or no view shows the cable.
     ReconstructionError
-        The voxels would take more than ``settings.memory_mb``.
+        The voxels would take more than ``settings.memory_mb`` even one per radius.
     Cancelled
     """
     cameras = list(cameras)
@@ -415,6 +422,18 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
         # the median over views of half the width times depth over focal length
         radius = float(np.median(radii))
     fine = radius / settings.voxels_per_radius
+    while True:
+        try:
+            return _carve_levels(views, lower, side, fine, radius, settings, stage, cancel)
+        except _OverBudget as error:
+            if radius / (2 * fine) < _LEAST_VOXELS_PER_RADIUS:
+                raise ReconstructionError(str(error)) from None
+            log.info("%s: carving in voxels twice as large", error)
+            fine *= 2
+
+
+def _carve_levels(views, lower, side, fine, radius, settings, stage, cancel):
+    """The grids carved coarse to fine down to voxels of ``fine``."""
     levels = 0 if not settings.coarse_to_fine else max(
         int(math.ceil(math.log2(side / (fine * settings.root_cells)))), 0)
     cells = int(math.ceil(side / (fine * 2 ** levels)))
@@ -449,11 +468,15 @@ def carve(cameras, masks, junctions=None, *, radius=None, region=None,
     return _dense_grid(index, junction[large], counted[large], hits[large], lower, fine, radius)
 
 
+class _OverBudget(ReconstructionError):
+    """The voxels would take more than the memory budget."""
+
+
 def _check_memory(needed, settings, what):
     """A :class:`.ReconstructionError` when ``needed`` bytes exceed the budget."""
     budget = settings.memory_mb * 2 ** 20
     if needed > budget:
-        raise ReconstructionError(
+        raise _OverBudget(
             f"carving would need {needed / 2 ** 30:.1f} GB for {what}, over its budget of "
             f"{budget / 2 ** 30:.1f} GB: the masks take in far more than a thin cable (check "
             f"them: segment writes them), or the views are too few to bound it")

@@ -144,6 +144,25 @@ def test_masks_that_take_in_everything_stop_at_the_memory_budget(scene):
     assert grid.occupied.any()
 
 
+def test_past_the_budget_the_carve_is_coarser_and_says_so(scene):
+    from engine.carving import _BOX_BYTES, _OCCUPIED_BYTES
+
+    scene, _ = scene
+    r = scene.truth.radius
+    fine = carve(scene.cameras, scene.masks, radius=r)
+    needed = (fine.occupied.sum() * _OCCUPIED_BYTES
+              + np.prod(np.array(fine.shape) + 1.0) * _BOX_BYTES) / 2 ** 20
+    coarse = carve(scene.cameras, scene.masks, radius=r,
+                   settings=CarvingSettings(memory_mb=0.7 * needed))
+    assert fine.voxel_size == pytest.approx(r / 3)
+    assert coarse.voxel_size == pytest.approx(2 * fine.voxel_size)
+    # the same cable: every coarse voxel's centre lies within a coarse voxel of a fine one
+    from scipy.spatial import cKDTree
+    distance, _ = cKDTree(fine.occupied_points()).query(coarse.occupied_points())
+    assert np.percentile(distance, 95) < coarse.voxel_size
+    assert 4 < fine.occupied.sum() / coarse.occupied.sum() < 12
+
+
 def test_a_packed_mask_gives_back_the_mask_in_an_eighth_of_the_memory():
     from engine.packed_mask import PackedMask, unpacked
 

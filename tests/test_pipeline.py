@@ -138,6 +138,15 @@ def test_a_frame_without_cable_is_a_warning(capture, tmp_path):
     assert evaluate(result, scene.truth).one_path
 
 
+def test_few_views_work_with_a_warning(tmp_path):
+    scene = make_scene(SceneSpec(crossings=2, seed=3, views=4, width=480, height=360,
+                                 radius=0.006, image_format="jpg"))
+    folder = write_scene(scene, tmp_path / "few")
+    result = reconstruct(folder / "images", cameras=folder / "sparse")
+    assert len(result.paths) >= 1
+    assert any(w.startswith("only 4 views") for w in result.warnings), result.warnings
+
+
 def test_cameras_that_cannot_be_estimated_fail_with_a_reason(tmp_path):
     images = tmp_path / "images"
     images.mkdir()
