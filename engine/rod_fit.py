@@ -233,6 +233,23 @@ def _across(smooth):
     return curvature, np.cos(angle), np.sin(angle)
 
 
+#: A cable wider than twice this (pixels; 4K and 8K frames) has its ridge found on its mask
+#: reduced by a whole factor (:func:`_reduction`), and its evidence kept in cells of that many
+#: pixels: the ridge's cost and the evidence's memory grow with the square of the width (a 4K
+#: view of a cable 70 pixels wide held 50 MB), and a dozen pixels across the cable place its
+#: centre as well.
+_WIDE_HALF_WIDTH = 12.0
+#: ... reduced so its half width is about this.
+_REDUCED_HALF_WIDTH = 6.0
+
+
+def _reduction(half_width):
+    """The whole factor a cable's mask is reduced by for its ridge and evidence (1: none)."""
+    if half_width <= _WIDE_HALF_WIDTH:
+        return 1
+    return int(math.ceil(half_width / _REDUCED_HALF_WIDTH))
+
+
 def _ridge(mask, half_width):
     """Sub-pixel centre line of a mask: points ``(K, 2)`` (COLMAP coordinates) and unit normals.
 
@@ -249,8 +266,19 @@ def _ridge(mask, half_width):
     margin = int(math.ceil(1.5 * half_width)) + 4
     top, left = max(rows[0] - margin, 0), max(cols[0] - margin, 0)
     box = mask[top:rows[-1] + margin + 1, left:cols[-1] + margin + 1]
-    points, normals = _ridge_in_box(box, half_width)
-    return points + (left, top), normals
+    factor = _reduction(half_width)
+    if factor < 2:
+        points, normals = _ridge_in_box(box, half_width)
+        return points + (left, top), normals
+    # a wide cable (a 4K or 8K frame): the ridge of the mask reduced ``factor`` times (a
+    # pixel (j, i) there covers [j f, (j + 1) f) here, so its coordinates scale by f)
+    rows, cols = -(-box.shape[0] // factor) * factor, -(-box.shape[1] // factor) * factor
+    padded = np.zeros((rows, cols), np.uint8)
+    padded[:box.shape[0], :box.shape[1]] = box
+    small = cv2.resize(padded * 255, (cols // factor, rows // factor),
+                       interpolation=cv2.INTER_AREA) >= 128
+    points, normals = _ridge_in_box(small, half_width / factor)
+    return points * factor + (left, top), normals
 
 
 def _ridge_in_box(mask, half_width):
@@ -294,13 +322,17 @@ class ImageEvidence:
     ridge_normals : ndarray, shape (K, 2)
         Unit normals of the ridge there.
     pixels : ndarray of int, shape (P,)
-        Sorted linear indices (``row * width + col``) of the pixels within reach of the ridge.
+        Sorted linear indices (``row * columns + col`` of the grid of cells) of the cells
+        within reach of the ridge.
     nearest : ndarray of int, shape (P,)
-        The ridge point nearest to each of those pixels.
+        The ridge point nearest to each of those cells.
     weights : ndarray, shape (P,)
         Weight of a vertex projecting there: ``junction_weight`` in (grown) junctions, else 1.
     half_width : float
         The cable's typical half width in pixels.
+    cell : int
+        Pixels per cell side: 1, or more for a cable wider than ``2 * _WIDE_HALF_WIDTH``
+        pixels (:func:`_reduction`).
     """
 
     camera: Camera
@@ -310,6 +342,7 @@ class ImageEvidence:
     nearest: np.ndarray
     weights: np.ndarray
     half_width: float
+    cell: int = 1
 
     @classmethod
     def from_mask(cls, camera, mask, junction_mask=None, *, settings=RodFitSettings()):
@@ -343,23 +376,33 @@ class ImageEvidence:
         pinhole, (mask, junction_mask) = _undistorted(camera, [mask, junction_mask])
         half_width = 0.5 * cable_width(mask)
         points, normals = _ridge(mask, half_width)
-        pixels, nearest = _near_ridge(points, shape, settings.image_reach * max(half_width, 1.0))
+        cell = _reduction(half_width)
+        cells = (-(-shape[0] // cell), -(-shape[1] // cell))
+        pixels, nearest = _near_ridge(points / cell, cells,
+                                      settings.image_reach * max(half_width, 1.0) / cell)
         weights = np.ones(len(pixels))
         if junction_mask is not None and junction_mask.any():
-            grow = int(math.ceil(settings.junction_margin * half_width))
+            junctions = junction_mask.astype(np.uint8)
+            if cell > 1:  # a cell is in a junction when any of its pixels is
+                padded = np.zeros((cells[0] * cell, cells[1] * cell), np.uint8)
+                padded[:shape[0], :shape[1]] = junctions
+                junctions = padded.reshape(cells[0], cell, cells[1], cell).max(axis=(1, 3))
+            grow = int(math.ceil(settings.junction_margin * half_width / cell))
             kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
-            grown = cv2.dilate(junction_mask.astype(np.uint8), kernel).ravel() > 0
+            grown = cv2.dilate(junctions, kernel).ravel() > 0
             weights[grown[pixels]] = settings.junction_weight
         for array in (points, normals, pixels, nearest, weights):
             array.setflags(write=False)
-        return cls(pinhole, points, normals, pixels, nearest, weights, half_width)
+        return cls(pinhole, points, normals, pixels, nearest, weights, half_width, cell)
 
     def lookup(self, pixels):
         """Nearest ridge point (-1 for none) and weight at image points ``(M, 2)`` inside the
         image (COLMAP coordinates)."""
         if not len(self.pixels):
             return np.full(len(pixels), -1), np.zeros(len(pixels))
-        linear = pixels[:, 1].astype(np.int64) * self.camera.width + pixels[:, 0].astype(np.int64)
+        cell, columns = self.cell, -(-self.camera.width // self.cell)
+        linear = ((pixels[:, 1] // cell).astype(np.int64) * columns
+                  + (pixels[:, 0] // cell).astype(np.int64))
         slot = np.minimum(np.searchsorted(self.pixels, linear), len(self.pixels) - 1)
         found = self.pixels[slot] == linear
         return np.where(found, self.nearest[slot], -1), np.where(found, self.weights[slot], 0.0)

@@ -183,7 +183,8 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
     ----------
     frames : sequence of ndarray
         A few frames spread over the sequence (:func:`reference_frames`), RGB uint8; the
-        automatic colour's candidates come from the first.
+        automatic colour's candidates come from the first. Frames over :data:`_COLOUR_SIZE`
+        pixels are reduced first.
     colour : ColourRange, optional
         Set by hand or picked; found automatically if None.
     settings : SegmentationSettings, optional
@@ -194,7 +195,7 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
     model : ColourModel or None
         None when ``settings.model`` is off or the range has no thin piece in the frames.
     """
-    frames = list(frames)
+    frames = [_at_most(frame, _COLOUR_SIZE) for frame in frames]
     if colour is not None:
         return colour, learn_colour_model(frames, colour, settings) if settings.model else None
     colour, candidate = find_cable(frames)
@@ -204,6 +205,20 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
     if len(pixels):
         colour = range_of(pixels, shade=1.0)
     return colour, _model_of(frames, seeds, settings) if settings.model else None
+
+
+#: The colour and its model are learnt on frames reduced to at most this (longer side, pixels):
+#: they are colours, whatever the size (8K reference frames took two minutes, 4K ones 15 s).
+_COLOUR_SIZE = 4096
+
+
+def _at_most(image, size):
+    """``image`` reduced by a whole factor so its longer side is at most ``size`` pixels."""
+    factor = -(-max(image.shape[:2]) // size)
+    if factor <= 1:
+        return image
+    shape = (image.shape[1] // factor, image.shape[0] // factor)
+    return cv2.resize(image, shape, interpolation=cv2.INTER_AREA)
 
 
 def colour_at(image_rgb, x, y, *, radius=3):

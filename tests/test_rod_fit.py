@@ -267,6 +267,37 @@ def test_ridge_is_the_band_centre_to_a_fraction_of_a_pixel(width, angle):
     assert np.abs(lateral).max() < 0.15  # pixels
 
 
+@pytest.mark.parametrize("width, reduced", [(20, 1), (30, 3), (61, 6), (90, 8)])
+def test_a_wide_band_s_ridge_is_its_centre_too(width, reduced):
+    camera = look_at_camera("000.png", [0.0, -1.0, 1.0], width=900, height=700)
+    rows, cols = np.mgrid[0:700, 0:900]
+    direction = np.array([np.cos(np.radians(23.0)), np.sin(np.radians(23.0))])
+    centre = np.array([450.3, 351.7])
+    offset = np.stack([cols + 0.5 - centre[0], rows + 0.5 - centre[1]], -1)
+    across = offset @ np.array([-direction[1], direction[0]])
+    mask = (np.abs(across) <= width / 2) & (np.abs(offset @ direction) < 300)
+    evidence = ImageEvidence.from_mask(camera, mask)
+    inner = np.abs((evidence.ridge_points - centre) @ direction) < 250
+    lateral = (evidence.ridge_points[inner] - centre) @ np.array([-direction[1], direction[0]])
+    assert evidence.cell == reduced  # (the ridge found on the mask reduced as many times)
+    assert inner.sum() > 0.8 * 500 / reduced
+    assert np.abs(lateral).max() < 0.02 * width  # pixels
+    # looked up (in cells of ``reduced`` pixels): the centre's nearest ridge point, nothing
+    # three widths away
+    side = np.array([-direction[1], direction[0]])
+    index, weight = evidence.lookup(np.array([centre + 0.3 * width * side,
+                                              centre + 3.0 * width * side]))
+    assert index[1] == -1 and weight[1] == 0 and weight[0] == 1
+    assert np.linalg.norm(evidence.ridge_points[index[0]] - centre) < 0.5 * width
+    # a junction at the centre weighs the cells there down, not those a few widths along
+    junction = np.hypot(cols + 0.5 - centre[0], rows + 0.5 - centre[1]) < 0.5 * width
+    evidence = ImageEvidence.from_mask(camera, mask, junction)
+    _, weight = evidence.lookup(np.array([centre, centre + 4.0 * width * direction]))
+    assert weight[0] == RodFitSettings().junction_weight and weight[1] == 1
+    normals = evidence.ridge_normals[inner]
+    assert np.abs(normals @ np.array([-direction[1], direction[0]])).min() > 0.95
+
+
 def test_evidence_from_a_distorted_camera_is_undistorted():
     pinhole = look_at_camera("000.png", [0.0, -1.0, 1.0], width=320, height=240)
     (fx, fy), (cx, cy) = pinhole.focal, pinhole.principal_point
