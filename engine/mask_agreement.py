@@ -258,8 +258,9 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
             break
     stage(1.0, "masks agreed")
     removed, filled, updated = [], [], None if junctions is None else []
-    for k, (old, new) in enumerate(zip(given, current)):
-        old, new = old(), (old() if new is old else new())
+    for k, (before, after) in enumerate(zip(given, current)):
+        old = before()
+        new = old if after is before else after()
         removed.append(int(np.count_nonzero(old & ~new)))
         filled.append(int(np.count_nonzero(new & ~old)))
         if junctions is not None:
