@@ -305,6 +305,9 @@ def _run_command(command, interrupt, size_limit):
     """Run ``command`` (pressing Ctrl-C as ``interrupt`` says, under a file size limit if
     asked); its exit code and stderr."""
     def limit():
+        # a run started in the background inherits an ignored SIGINT, and Python then never
+        # turns Ctrl-C into KeyboardInterrupt: give it the default back
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
         if size_limit:
             resource.setrlimit(resource.RLIMIT_FSIZE, (1024, 1024))
 
