@@ -13,6 +13,7 @@ import dataclasses
 import os
 import re
 import resource
+import select
 import shutil
 import signal
 import struct
@@ -315,14 +316,19 @@ def _run_command(command, interrupt, size_limit):
                                cwd=Path(__file__).resolve().parents[1], preexec_fn=limit)
     stderr, waiting, seen = b"", [m.encode() for m in interrupt.after] if interrupt else [], 0
     deadline = time.monotonic() + 600
-    while chunk := os.read(process.stderr.fileno(), 1 << 16):
+    while True:
+        ready, _, _ = select.select([process.stderr], [], [], max(deadline - time.monotonic(), 0))
+        if not ready:  # silent past the deadline: a hang
+            process.kill()
+            break
+        chunk = os.read(process.stderr.fileno(), 1 << 16)
+        if not chunk:
+            break
         stderr += chunk
         while waiting and (found := stderr.find(waiting[0], seen)) >= 0:
             seen = found + len(waiting.pop(0))  # the next message is looked for after it
             if not waiting:
                 process.send_signal(signal.SIGINT)
-        if time.monotonic() > deadline:
-            process.kill()
     process.stderr.close()
     return process.wait(), stderr.decode(errors="replace")
 
