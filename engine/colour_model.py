@@ -30,7 +30,7 @@ from scipy.ndimage import gaussian_filter
 from .colour_range import ColourRange, hsv_image
 from .errors import ReconstructionError
 
-__all__ = ["ColourModel", "find_cable", "range_of", "thin_pieces", "thickest",
+__all__ = ["ColourModel", "find_cable", "range_of", "thin_pieces", "thickest", "reduced",
            "colour_candidates",
            "CableCandidate", "opened"]
 
@@ -47,7 +47,7 @@ _MAX_LOOPS = 12
 _MAX_COVERAGE = 0.3
 
 
-def _small(image_rgb, size=_SMALL):
+def reduced(image_rgb, size=_SMALL):
     """The frame reduced so its longer side is at most ``size`` pixels."""
     rows, cols = image_rgb.shape[:2]
     factor = max(rows, cols) / size
@@ -161,7 +161,7 @@ def _score(mask, lab, diagonal):
 def _clusters(image_rgb, clusters=_CLUSTERS, size=_SMALL):
     """The frame at the scoring size, in Lab, each pixel's colour cluster (k-means) and the
     clusters' centres (Lab)."""
-    small = _small(image_rgb, size)
+    small = reduced(image_rgb, size)
     lab = _lab(small)
     samples = lab.reshape(-1, 3)[::3].astype(np.float32)
     cv2.setRNGSeed(7)  # the same frame, the same clusters
@@ -371,7 +371,7 @@ def find_cable(images_rgb):
                                   "the frames (pick the cable's colour, or give --hsv)")
     totals = np.array([candidate.score for candidate in candidates], dtype=float)
     for image in images_rgb[1:]:  # agreement across frames: each candidate scored on the others
-        other = _small(image, size)
+        other = reduced(image, size)
         other_lab = _lab(other)
         diagonal = math.hypot(*other.shape[:2])
         labels = _nearest(other_lab, candidates[0].centres)

@@ -532,9 +532,8 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
             frame_masks, frame_junctions = read_masks(masks, sequence.names, sequence.width,
                                                       sequence.height, packed=True)
             if frame_junctions is None:
-                frame_junctions = [PackedMask(junction_map(m(), cable_width(m()),
-                                                           settings.segmentation))
-                                   for m in frame_masks]
+                frame_junctions = [_junctions_of(mask(), settings.segmentation)
+                                   for mask in frame_masks]
             stage(1.0, "masks")
         else:
             colour, frame_masks, frame_junctions = _segment(sequence, colour, settings, stage,
@@ -581,6 +580,11 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         warnings=tuple(warnings), diameter=diameter, length=length,
         estimated=cameras is None, colour=colour_seen)
     return state._fitted(clock, stage, cancel)
+
+
+def _junctions_of(mask, settings):
+    """The junction map of a mask given without one, packed."""
+    return PackedMask(junction_map(mask, cable_width(mask), settings))
 
 
 def _agree(views, settings, stage, cancel):

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .colour_model import ColourModel, find_cable, opened, range_of, thickest, thin_pieces
+from .colour_model import (ColourModel, find_cable, opened, range_of, reduced, thickest,
+                           thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 
@@ -37,6 +38,10 @@ _AROUND = 2.5
 #: :func:`refine_edges` takes the cable's and the background's colours from every this many
 #: of their pixels.
 _EDGE_SAMPLE = 7
+
+#: The colour and its model are learnt on frames reduced to at most this (longer side, pixels):
+#: they are colours, whatever the size (8K reference frames took two minutes, 4K ones 15 s).
+_COLOUR_SIZE = 4096
 
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "auto_colour",
            "reference_frames", "sequence_colour", "learn_colour_model", "colour_seed",
@@ -195,7 +200,7 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
     model : ColourModel or None
         None when ``settings.model`` is off or the range has no thin piece in the frames.
     """
-    frames = [_at_most(frame, _COLOUR_SIZE) for frame in frames]
+    frames = [reduced(frame, _COLOUR_SIZE) for frame in frames]
     if colour is not None:
         return colour, learn_colour_model(frames, colour, settings) if settings.model else None
     colour, candidate = find_cable(frames)
@@ -205,20 +210,6 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
     if len(pixels):
         colour = range_of(pixels, shade=1.0)
     return colour, _model_of(frames, seeds, settings) if settings.model else None
-
-
-#: The colour and its model are learnt on frames reduced to at most this (longer side, pixels):
-#: they are colours, whatever the size (8K reference frames took two minutes, 4K ones 15 s).
-_COLOUR_SIZE = 4096
-
-
-def _at_most(image, size):
-    """``image`` reduced by a whole factor so its longer side is at most ``size`` pixels."""
-    factor = -(-max(image.shape[:2]) // size)
-    if factor <= 1:
-        return image
-    shape = (image.shape[1] // factor, image.shape[0] // factor)
-    return cv2.resize(image, shape, interpolation=cv2.INTER_AREA)
 
 
 def colour_at(image_rgb, x, y, *, radius=3):
