@@ -15,7 +15,7 @@ from ..engine.bezier import BezierSettings
 from ..engine.cli import (EXIT_BAD_INPUT, ProgressBar, add_reconstruct_arguments,
                           reconstruct_arguments, run_with_exit_code)
 from ..engine.errors import InputError, OutputError
-from ..engine.files import check_writable
+from ..engine.files import check_output_file
 from ..engine.settings_cli import add_settings_arguments, settings_from_arguments
 from .reconstruction import RunRequest, apply_outcome, reconstruct_work, sequence_name
 
@@ -49,9 +49,7 @@ def _reconstruct(args):
     output = Path(args.output).resolve()
     if output.suffix != ".blend":
         raise InputError(f"{args.output}: the output must be a .blend file")
-    if output.exists() and not args.overwrite:
-        raise InputError(f"{args.output} exists (use --overwrite to replace it)")
-    check_writable(output.parent)  # before the work, not when the .blend is saved
+    check_output_file(output, overwrite=args.overwrite)  # before the work, not when saved
     engine = reconstruct_arguments(args)
     images = str(Path(engine["images"]).resolve())
     request = RunRequest(

@@ -135,17 +135,15 @@ def reconstruct_arguments(args):
 def _run_reconstruct(args):
     from pathlib import Path
 
-    from .files import check_writable
+    from .files import check_output_file
     from .obj_export import write_obj
     from .pipeline import reconstruct
     from .result import write_result
 
     output = Path(args.output or Path(args.images).resolve().name + ".cable.json")
     for path in (output, Path(args.obj) if args.obj else None):
-        if path is not None and path.exists() and not args.overwrite:
-            raise InputError(f"{path} exists (use --overwrite to replace it)")
         if path is not None:  # before the work, not when its result is written
-            check_writable(path.resolve().parent)
+            check_output_file(path, overwrite=args.overwrite)
     result = reconstruct(**reconstruct_arguments(args),
                          progress=None if args.quiet else ProgressBar())
     write_result(result, output, overwrite=args.overwrite)

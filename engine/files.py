@@ -6,9 +6,9 @@ from pathlib import Path
 
 import cv2
 
-from .errors import OutputError
+from .errors import InputError, OutputError
 
-__all__ = ["write_atomic", "write_image", "check_writable"]
+__all__ = ["write_atomic", "write_image", "check_writable", "check_output_file"]
 
 
 def check_writable(folder, *, created=False):
@@ -37,6 +37,25 @@ def check_writable(folder, *, created=False):
     except OSError as error:
         raise OutputError(f"cannot write in {folder}: {error.strerror or error}") from None
     os.unlink(probe)
+
+
+def check_output_file(path, *, overwrite=False):
+    """Check, before the work, that ``path`` can be written as a new file (or replaced, with
+    ``overwrite``).
+
+    Raises
+    ------
+    OutputError
+        ``path`` is a folder, or its folder is missing or may not be written in.
+    InputError
+        ``path`` exists and ``overwrite`` is off.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"{path} is a folder, not a file")
+    if path.exists() and not overwrite:
+        raise InputError(f"{path} exists (use --overwrite to replace it)")
+    check_writable(path.resolve().parent)
 
 
 def write_atomic(path, data, *, overwrite=False):

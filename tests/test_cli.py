@@ -63,6 +63,10 @@ def test_an_output_that_cannot_be_written_is_named_before_the_work(tmp_path):
         run = run_engine(*command)
         assert run.returncode == 2, run.stderr
         assert run.stderr.strip() == "error: cannot write in /sys: Permission denied"
+    (tmp_path / "taken").mkdir()
+    run = run_engine("reconstruct", str(images), "-o", str(tmp_path / "taken"), "--overwrite")
+    assert run.returncode == 2
+    assert run.stderr.strip() == f"error: {tmp_path / 'taken'} is a folder, not a file"
 
 
 def test_a_full_disk_leaves_nothing_behind(tmp_path, monkeypatch):
