@@ -250,6 +250,15 @@ def _reduction(half_width):
     return int(math.ceil(half_width / _REDUCED_HALF_WIDTH))
 
 
+def _blocks(image, factor):
+    """A 2-D ``image`` (as uint8) padded with zeros to whole ``factor`` x ``factor`` cells,
+    shaped ``(rows, factor, columns, factor)``."""
+    rows, cols = -(-image.shape[0] // factor), -(-image.shape[1] // factor)
+    padded = np.zeros((rows * factor, cols * factor), np.uint8)
+    padded[:image.shape[0], :image.shape[1]] = image
+    return padded.reshape(rows, factor, cols, factor)
+
+
 def _ridge(mask, half_width):
     """Sub-pixel centre line of a mask: points ``(K, 2)`` (COLMAP coordinates) and unit normals.
 
@@ -272,11 +281,7 @@ def _ridge(mask, half_width):
         return points + (left, top), normals
     # a wide cable (a 4K or 8K frame): the ridge of the mask reduced ``factor`` times (a
     # pixel (j, i) there covers [j f, (j + 1) f) here, so its coordinates scale by f)
-    rows, cols = -(-box.shape[0] // factor) * factor, -(-box.shape[1] // factor) * factor
-    padded = np.zeros((rows, cols), np.uint8)
-    padded[:box.shape[0], :box.shape[1]] = box
-    small = cv2.resize(padded * 255, (cols // factor, rows // factor),
-                       interpolation=cv2.INTER_AREA) >= 128
+    small = _blocks(box, factor).mean(axis=(1, 3)) >= 0.5  # a cell is cable if half is
     points, normals = _ridge_in_box(small, half_width / factor)
     return points * factor + (left, top), normals
 
@@ -382,11 +387,8 @@ class ImageEvidence:
                                       settings.image_reach * max(half_width, 1.0) / cell)
         weights = np.ones(len(pixels))
         if junction_mask is not None and junction_mask.any():
-            junctions = junction_mask.astype(np.uint8)
-            if cell > 1:  # a cell is in a junction when any of its pixels is
-                padded = np.zeros((cells[0] * cell, cells[1] * cell), np.uint8)
-                padded[:shape[0], :shape[1]] = junctions
-                junctions = padded.reshape(cells[0], cell, cells[1], cell).max(axis=(1, 3))
+            # a cell is in a junction when any of its pixels is
+            junctions = _blocks(junction_mask, cell).max(axis=(1, 3))
             grow = int(math.ceil(settings.junction_margin * half_width / cell))
             kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
             grown = cv2.dilate(junctions, kernel).ravel() > 0

@@ -142,10 +142,13 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         thumbnails = []
         for k, name in enumerate(sequence.names):
             stem = Path(name).stem + ".png"
-            mask, junction, before = frame_masks[k](), frame_junctions[k](), segmented[k]()
+            mask, junction = frame_masks[k](), frame_junctions[k]()
             write_image(masks / stem, mask.astype(np.uint8) * 255, overwrite=True)
             write_image(junctions / stem, junction.astype(np.uint8) * 255, overwrite=True)
-            changes = (before & ~mask, mask & ~before) if agree else (None, None)
+            changes = (None, None)
+            if agree and segmented[k] is not frame_masks[k]:
+                before = segmented[k]()
+                changes = (before & ~mask, mask & ~before)
             thumbnails.append(_overlay(sequence.read(k), mask, junction, *changes))
         sheet = contact_sheet(thumbnails)
         write_image(output / "contact_sheet.png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR),
