@@ -39,9 +39,10 @@ _AROUND = 2.5
 #: of their pixels.
 _EDGE_SAMPLE = 7
 
-#: The colour and its model are learnt on frames reduced to at most this (longer side, pixels):
-#: they are colours, whatever the size (8K reference frames took two minutes, 4K ones 15 s).
-_COLOUR_SIZE = 4096
+#: The colour and its model are learnt on frames reduced to at most this (longer side, pixels;
+#: 4K): they are colours, whatever the size (8K reference frames took two minutes, 4K ones
+#: 15 s; at 4096 an 8K frame's search for the cable tried one size more, 20 s).
+_COLOUR_SIZE = 3840
 
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "auto_colour",
            "reference_frames", "sequence_colour", "learn_colour_model", "colour_seed",
