@@ -24,6 +24,7 @@ _LAZY = {
     "CarvingSettings": "carving", "VoxelGrid": "carving", "carve": "carving",
     "SegmentGraphSettings": "segment_graph", "SegmentGraph": "segment_graph",
     "extract_segment_graph": "segment_graph",
+    "extract_segment_graph_from_voxels": "segment_graph",
     "RodSettings": "rod", "Rod": "rod", "solve_rod": "rod",
     "RodFitSettings": "rod_fit", "RodFit": "rod_fit", "fit_rod": "rod_fit",
     "ImageEvidence": "rod_fit", "Contact": "rod_fit", "Voxels": "rod_fit",

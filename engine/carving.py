@@ -18,10 +18,11 @@ of the region).
 Nothing here depends on the image count or size for memory: masks are read one view at a time
 (arrays or callables that load them), kept bit-packed between levels, and only the voxels of
 the current level are held. The voxels follow the masks, though: masks that take in much of
-the table, or too few views to bound the cable, make billions of them, and the grid the later
-stages work on spans the occupied voxels' box (a thin wire across a large floor: hundreds of
-millions). Before each split and before the grid is built, the voxels' memory (and what the
-stages after carving build on them) is checked against a budget (``memory_mb``); past it, the
+the table, or too few views to bound the cable, make billions of them. The carved grid is a
+list of the occupied voxels, never a box (a thin wire across a large floor has a box of
+hundreds of millions of voxels, and a few hundred thousand occupied). Before each split and
+before the grid is built, the voxels' memory (and what the stages after carving build on them)
+is checked against a budget (``memory_mb``); past it, the
 carve starts again in voxels twice as large (down to one per cable radius: the grid's
 ``voxel_size`` says so), and past that it stops with a clear error rather than run the
 machine out of memory.
@@ -39,8 +40,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
+from . import sparse_voxels
 from .errors import ReconstructionError
 from .packed_mask import PackedMask, unpacked
 from .progress import StageProgress, check_cancel
@@ -61,9 +62,11 @@ _LEVEL_BYTES = 80
 #: Past the memory budget, the carve is tried again in voxels twice as large while there are
 #: at least this many voxels per cable radius (two across the cable).
 _LEAST_VOXELS_PER_RADIUS = 1.0
-#: Bytes the carved grid and the stages after it (the segment graph's neighbour tables, the
-#: rod fit's voxel points) cost per occupied voxel, and per voxel of the grid's box.
-_OCCUPIED_BYTES, _BOX_BYTES = 256, 12
+#: Bytes the carved grid costs per occupied voxel (its index, junction flag, views and
+#: agreement: 31), and the segment graph at its peak per voxel of the grid's core (its
+#: neighbour tables, adjacency and distances: 1191-1193 measured with tracemalloc on two
+#: scenes; the rod fit's voxel points cost less).
+_VOXEL_BYTES, _CORE_BYTES = 32, 1200
 
 
 @dataclass(frozen=True)
@@ -130,25 +133,28 @@ class CarvingSettings:
 
 @dataclass(frozen=True, eq=False)
 class VoxelGrid:
-    """Carved grids over the box of the occupied voxels (one empty voxel of margin).
+    """The carved voxels, kept as a list: memory follows the cable, not its box.
 
     Attributes
     ----------
-    occupied, junction : ndarray of bool, shape (I, J, K)
-        Indexed along world x, y, z.
+    index : ndarray of int64, shape (N, 3)
+        The occupied voxels' indices along world x, y, z, in C order (as ``numpy.argwhere``
+        lists them), each at least 1 (one empty voxel of margin before the first).
+    junction : ndarray of bool, shape (N,)
+        Which of them are junction voxels.
     origin : ndarray, shape (3,)
         World position of the centre of voxel ``[0, 0, 0]``.
     voxel_size : float
     radius : float
         The cable radius the grid was made for (world units).
-    visible : ndarray of int16, shape (I, J, K)
-        Views in which each voxel lies inside the frame (0 where not computed: empty voxels).
-    agreement : ndarray of float32, shape (I, J, K)
-        Fraction of those views in which it falls on cable pixels (0 for empty voxels). The
-        half-vote hull is fat; its voxels where (nearly) all views agree are the cable's core.
+    visible : ndarray of int16, shape (N,)
+        Views in which each voxel lies inside the frame.
+    agreement : ndarray of float32, shape (N,)
+        Fraction of those views in which it falls on cable pixels. The half-vote hull is fat;
+        its voxels where (nearly) all views agree are the cable's core.
     """
 
-    occupied: np.ndarray
+    index: np.ndarray
     junction: np.ndarray
     origin: np.ndarray
     voxel_size: float
@@ -156,21 +162,33 @@ class VoxelGrid:
     visible: np.ndarray = None
     agreement: np.ndarray = None
 
+    def __len__(self):
+        return len(self.index)
+
     def core(self, agreement):
-        """Occupied voxels on cable pixels in at least this fraction of their views."""
-        return self.occupied & (self.agreement >= agreement - 1e-6)
+        """Which voxels, ``(N,)`` bool, fall on cable pixels in at least this fraction of
+        their views."""
+        return self.agreement >= agreement - 1e-6
 
     def centres(self, index):
-        """World positions of voxel indices ``(N, 3)``."""
+        """World positions of voxel indices ``(M, 3)``."""
         return self.origin + np.asarray(index, dtype=np.float64) * self.voxel_size
 
-    def occupied_points(self):
-        """World positions of the occupied voxels' centres, ``(N, 3)``."""
-        return self.centres(np.argwhere(self.occupied))
+    def occupied_points(self, which=None):
+        """World positions of the voxels' centres (those where ``which`` is True), ``(M, 3)``."""
+        return self.centres(self.index if which is None else self.index[which])
 
     @property
     def shape(self):
-        return self.occupied.shape
+        """The voxels' box with one empty voxel of margin on each side."""
+        return tuple(int(n) for n in self.index.max(axis=0) + 2) if len(self) else (1, 1, 1)
+
+    def dense(self, which=None):
+        """The occupied voxels (those where ``which`` is True) as a bool grid of
+        :attr:`shape`: for small grids and tests, it costs a byte per voxel of the box."""
+        grid = np.zeros(self.shape, dtype=bool)
+        grid[tuple((self.index if which is None else self.index[which]).T)] = True
+        return grid
 
 
 def _radius_in_view(camera, mask, centre):
@@ -455,17 +473,14 @@ def _carve_levels(views, lower, side, fine, radius, settings, stage, cancel):
                 _check_memory(8 * len(index) * _LEVEL_BYTES, settings,
                               f"{8 * len(index):,} voxels of {size / 2:.3g} at level {level - 1}")
                 index = (2 * index[:, None, :] + _CHILDREN[None]).reshape(-1, 3)
-    if len(index):  # the pieces are labelled on the box pooled 2x2x2 (a bool, an int32)
-        box = np.prod(index.max(axis=0) - index.min(axis=0) + 3, dtype=np.float64)
-        _check_memory(box / 8 * 5, settings, f"the pieces of a box of {box:,.0f} voxels")
     large = _large_pieces(index, fine, settings.min_piece_length * radius)
-    index = index[large]
-    if len(index):  # without the small pieces (ghosts far from the cable), the grid's box
-        box = np.prod(index.max(axis=0) - index.min(axis=0) + 3, dtype=np.float64)
-        _check_memory(len(index) * _OCCUPIED_BYTES + box * _BOX_BYTES, settings,
-                      f"{len(index):,} occupied voxels in a box of {box:,.0f}")
+    index = index[large]  # without the small pieces (ghosts far from the cable)
+    core = int(np.count_nonzero(hits[large] >= (settings.core_agreement - 1e-6)
+                                * np.maximum(counted[large], 1)))
+    _check_memory(len(index) * _VOXEL_BYTES + core * _CORE_BYTES, settings,
+                  f"{len(index):,} occupied voxels ({core:,} in the core)")
     stage(1.0, "carved")
-    return _dense_grid(index, junction[large], counted[large], hits[large], lower, fine, radius)
+    return _grid(index, junction[large], counted[large], hits[large], lower, fine, radius)
 
 
 class _OverBudget(ReconstructionError):
@@ -485,41 +500,37 @@ def _check_memory(needed, settings, what):
 def _large_pieces(index, size, min_length):
     """Which voxels ``index`` belong to pieces whose box diagonal reaches ``min_length``.
 
-    Pieces are found on the grid pooled 2x2x2 (pieces one voxel apart merge, and are kept
-    together), from the sparse voxels, so the cost follows the voxels, not their box.
+    Pieces are found among the voxels pooled 2x2x2 (pieces one voxel apart merge, and are kept
+    together), as a list, so the cost follows the voxels, not their box.
     """
     if not len(index):
         return np.ones(0, dtype=bool)
-    pooled_index = (index - index.min(axis=0)) // 2
-    pooled = np.zeros(tuple(pooled_index.max(axis=0) + 1), dtype=bool)
-    pooled[tuple(pooled_index.T)] = True
-    labels, count = ndimage.label(pooled, structure=np.ones((3, 3, 3)))
-    large = np.zeros(count + 1, dtype=bool)
-    for number, box in enumerate(ndimage.find_objects(labels), start=1):
-        extent = np.array([piece.stop - piece.start for piece in box]) * 2 * size
-        large[number] = np.linalg.norm(extent) >= min_length
-    keep = large[labels[tuple(pooled_index.T)]]
+    cells = (index - index.min(axis=0)) // 2
+    extent = tuple(cells.max(axis=0) + 1)
+    keys, voxel_cell = np.unique(np.ravel_multi_index(tuple(cells.T), extent),
+                                 return_inverse=True)
+    pooled = np.column_stack(np.unravel_index(keys, extent))
+    count, labels = sparse_voxels.pieces(pooled)
+    low = np.full((count, 3), np.iinfo(np.int64).max)
+    high = np.full((count, 3), np.iinfo(np.int64).min)
+    np.minimum.at(low, labels, pooled)
+    np.maximum.at(high, labels, pooled)
+    large = np.linalg.norm((high - low + 1) * 2 * size, axis=1) >= min_length
+    keep = large[labels[voxel_cell.reshape(-1)]]
     if not keep.all():
         log.debug("dropped %d small occupied pieces (%d voxels)",
                   count - large.sum(), (~keep).sum())
     return keep
 
 
-def _dense_grid(index, junction, counted, hits, lower, size, radius):
+def _grid(index, junction, counted, hits, lower, size, radius):
+    """The grid of the carved voxels, in C order, indexed from one voxel of margin."""
     if not len(index):
-        empty = np.zeros((1, 1, 1), dtype=bool)
-        return VoxelGrid(empty, empty.copy(), lower + 0.5 * size, size, radius,
-                         np.zeros((1, 1, 1), np.int16), np.zeros((1, 1, 1), np.float32))
+        return VoxelGrid(np.zeros((0, 3), np.int64), np.zeros(0, bool), lower + 0.5 * size,
+                         size, radius, np.zeros(0, np.int16), np.zeros(0, np.float32))
     start = index.min(axis=0) - 1
-    shape = tuple(index.max(axis=0) - start + 2)
-    local = tuple((index - start).T)
-    occupied = np.zeros(shape, dtype=bool)
-    occupied[local] = True
-    junctions = np.zeros(shape, dtype=bool)
-    junctions[local] = junction
-    visible = np.zeros(shape, dtype=np.int16)
-    visible[local] = counted
-    agreement = np.zeros(shape, dtype=np.float32)
-    agreement[local] = hits / np.maximum(counted, 1)
+    order = sparse_voxels.sorted_voxels(index)
     origin = lower + (start + 0.5) * size
-    return VoxelGrid(occupied, junctions, origin, size, radius, visible, agreement)
+    return VoxelGrid((index - start)[order], junction[order], origin, size, radius,
+                     counted[order].astype(np.int16),
+                     (hits / np.maximum(counted, 1)).astype(np.float32)[order])

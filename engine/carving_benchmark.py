@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from .benchmarks import in_fresh_process
 from .camera import Camera
 from .carving import CarvingSettings, carve
-from .segment_graph import extract_segment_graph
+from .segment_graph import extract_segment_graph_from_voxels
 from .segmentation import (cable_width, junction_map, reference_frames, segment_frame,
                            sequence_colour)
 from .synthetic_cameras import orbit_cameras
@@ -99,11 +99,12 @@ def _carve_row(cameras, paths, truth, settings, scale, cells):
     carved = time.perf_counter()
     row = {"carve_s": carved - started, "grid": "x".join(map(str, grid.shape)),
            "voxels_across": 2 * grid.radius / grid.voxel_size,
-           "occupied": int(grid.occupied.sum())}
+           "occupied": len(grid)}
     if scale == 1:
         core = grid.core(settings.core_agreement)
-        graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,
-                                      voxel_size=grid.voxel_size, radius=grid.radius)
+        graph = extract_segment_graph_from_voxels(grid.index[core], grid.junction[core],
+                                                  origin=grid.origin,
+                                                  voxel_size=grid.voxel_size, radius=grid.radius)
         row["graph_s"] = time.perf_counter() - carved
         row.update(graph_scores(graph, truth))
     return row

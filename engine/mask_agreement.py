@@ -232,7 +232,7 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
         except ValueError as error:  # no view shows the cable: nothing to agree on
             log.info("masks not agreed: %s", error)
             break
-        if not grid.occupied.any():
+        if not len(grid):
             log.info("masks not agreed: the views agree on no voxel")
             break
         radius = grid.radius
@@ -286,10 +286,9 @@ class _Voxels:
     """The occupied voxels of an agreement carve: centres, views seeing them, views hit."""
 
     def __init__(self, grid, carving, views):
-        index = np.argwhere(grid.occupied)
-        self.points = grid.centres(index)
-        self.visible = grid.visible[tuple(index.T)].astype(np.float64)
-        self.hits = np.rint(grid.agreement[tuple(index.T)] * self.visible)
+        self.points = grid.occupied_points()
+        self.visible = grid.visible.astype(np.float64)
+        self.hits = np.rint(grid.agreement * self.visible)
         self.radius, self.size = grid.radius, grid.voxel_size
         self.vote = carving.vote
         self.strict = max(carving.min_views, carving.min_view_fraction * views - 1e-9)

@@ -34,7 +34,7 @@ from .packed_mask import PackedMask, unpacked
 from .progress import StageProgress, check_cancel
 from .result import CablePath, Crossing, Result, StrandRef
 from .rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
-from .segment_graph import SegmentGraphSettings, extract_segment_graph
+from .segment_graph import SegmentGraphSettings, extract_segment_graph_from_voxels
 from .segmentation import (ColourRange, SegmentationSettings, cable_width, junction_map,
                            reference_frames, segment_frame, sequence_colour)
 from .topology import TopologySettings, resolve_topology
@@ -610,7 +610,7 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
     except ValueError as error:
         raise ReconstructionError(f"carving failed: {error}") from None
     clock.done()
-    if not grid.occupied.any():
+    if not len(grid):
         raise ReconstructionError("the frames do not agree on any cable voxel: the cameras or "
                                   "the masks are wrong")
     wanted = grid.radius / settings.carving.voxels_per_radius
@@ -622,9 +622,9 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
             f"together may be missed"]
     stage = clock.stage("graph")
     core = grid.core(settings.carving.core_agreement)
-    graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,
-                                  voxel_size=grid.voxel_size, radius=grid.radius,
-                                  settings=settings.graph, progress=stage, cancel=cancel)
+    graph = extract_segment_graph_from_voxels(
+        grid.index[core], grid.junction[core], origin=grid.origin, voxel_size=grid.voxel_size,
+        radius=grid.radius, settings=settings.graph, progress=stage, cancel=cancel)
     clock.done()
     if graph.n_segments == 0:
         raise ReconstructionError("no cable segment could be found in the carved volume")

@@ -190,12 +190,10 @@ class Voxels:
         Voxels
         """
         if agreement is None:
-            occupied = grid.occupied
-        elif 0.0 < agreement <= 1.0:
-            occupied = grid.core(agreement)
-        else:
+            return cls(grid.occupied_points(), grid.voxel_size)
+        if not 0.0 < agreement <= 1.0:
             raise ValueError("agreement must lie in (0, 1]")
-        return cls(grid.centres(np.argwhere(occupied)), grid.voxel_size)
+        return cls(grid.occupied_points(grid.core(agreement)), grid.voxel_size)
 
     def near(self, points, reach):
         """The voxels within ``reach`` (world units) of any of ``points`` (e.g. a densely

@@ -41,15 +41,16 @@ from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
+from . import sparse_voxels
 from .progress import StageProgress, check_cancel
 
-__all__ = ["SegmentGraphSettings", "SegmentGraph", "extract_segment_graph", "voxelize_tubes"]
+__all__ = ["SegmentGraphSettings", "SegmentGraph", "extract_segment_graph",
+           "extract_segment_graph_from_voxels", "voxelize_tubes"]
 
 log = logging.getLogger(__name__)
 
 #: The 26 neighbour steps of a voxel and their lengths.
-_STEPS = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
-                   if (a, b, c) != (0, 0, 0)])
+_STEPS = sparse_voxels.NEIGHBOUR_STEPS
 _STEP_LENGTHS = np.linalg.norm(_STEPS, axis=1)
 
 #: Node kinds of the segment graph.
@@ -240,21 +241,53 @@ def extract_segment_graph(occupied, junction, *, origin, voxel_size, radius,
         If the grids are not 3D boolean arrays of the same shape or a length is not positive.
     """
     occupied, junction = _check_grids(occupied, junction)
+    return extract_segment_graph_from_voxels(
+        np.argwhere(occupied), junction[occupied], origin=origin, voxel_size=voxel_size,
+        radius=radius, settings=settings, progress=progress, cancel=cancel)
+
+
+def extract_segment_graph_from_voxels(index, junction, *, origin, voxel_size, radius,
+                                      settings=SegmentGraphSettings(), progress=None,
+                                      cancel=None):
+    """:func:`extract_segment_graph` of voxels given as a list, not a grid.
+
+    Time and memory follow the number of voxels, not their bounding box (a thin wire
+    across a large, loosely bounded scene).
+
+    Parameters
+    ----------
+    index : numpy.ndarray of int, shape (n, 3)
+        The occupied voxels' indices [i, j, k] along world x, y, z, distinct, in C order (as
+        ``numpy.argwhere`` lists them: the result does not depend on the order otherwise, but
+        ties between equal distances are broken by it).
+    junction : numpy.ndarray of bool, shape (n,)
+        Which of them are voted as junctions.
+    origin, voxel_size, radius, settings, progress, cancel
+        As for :func:`extract_segment_graph`.
+
+    Returns
+    -------
+    SegmentGraph
+    """
+    index = np.asarray(index)
+    junction = np.asarray(junction)
+    if (index.ndim != 2 or index.shape[1:] != (3,) or junction.shape != index.shape[:1]
+            or not np.issubdtype(index.dtype, np.integer) or junction.dtype != bool):
+        raise ValueError("index must be (n, 3) integers and junction (n,) booleans")
     if not voxel_size > 0 or not radius > 0:
         raise ValueError("voxel_size and radius must be positive")
     report = _Progress(progress, cancel)
     scale = _Scale(radius / voxel_size, settings)
-    box = _bounding_box(occupied)
     graph = nx.MultiGraph()
-    if box is not None:
-        voxels = _VoxelGraph(occupied[box], junction[box])
+    if len(index):
+        offset = index.min(axis=0) - 1  # the voxels' box, padded by one voxel
+        voxels = _VoxelGraph(index - offset, junction)
         report("grow fronts", 0.1)
         fronts = _Fronts(voxels, scale)
         report("link fronts", 0.4)
         topology = _Topology(fronts, scale)
         topology.simplify()
         report("centrelines", 0.6)
-        offset = np.array([s.start for s in box]) - 1  # the box is padded by one voxel
         graph = _assemble(topology, fronts, scale, offset, report)
     report("done", 1.0)
     result = SegmentGraph(_to_world(graph, origin, voxel_size), origin=origin,
@@ -337,12 +370,6 @@ def _check_grids(occupied, junction):
     return occupied, junction
 
 
-def _bounding_box(occupied):
-    """Slices of the occupied voxels' bounding box, or None when there are none."""
-    found = ndimage.find_objects(occupied.view(np.uint8))
-    return found[0] if found else None
-
-
 class _Progress:
     """Reports progress and honours cancellation between steps."""
 
@@ -379,7 +406,7 @@ class _Scale:
 # -- voxels as a sparse graph --------------------------------------------------------------------
 
 class _VoxelGraph:
-    """Occupied voxels of a box (padded here by one voxel) as a graph of 26-neighbours.
+    """Voxels as a graph of 26-neighbours.
 
     Every voxel has 26 edge slots; a slot with no occupied neighbour holds a loop back to the
     voxel itself, which changes no distance and no component, so the arrays stay rectangular.
@@ -387,7 +414,7 @@ class _VoxelGraph:
     Attributes
     ----------
     coords : numpy.ndarray, shape (n, 3)
-        Voxel indices in the padded box.
+        Voxel indices (in the voxels' box padded by one voxel).
     junction : numpy.ndarray of bool, shape (n,)
         Which voxels are junction votes.
     graph : scipy.sparse.csr_matrix
@@ -396,20 +423,13 @@ class _VoxelGraph:
         The two voxels of every (directed) edge slot.
     """
 
-    def __init__(self, occupied, junction):
-        occupied = np.pad(occupied, 1)
-        flat = np.flatnonzero(occupied)
-        n = len(flat)
-        index = np.full(occupied.size, -1, dtype=np.int32)
-        index[flat] = np.arange(n, dtype=np.int32)
-        strides = np.array([occupied.shape[1] * occupied.shape[2], occupied.shape[2], 1])
-        neighbours = np.empty((n, len(_STEPS)), dtype=np.int32)
-        for column, step in enumerate(_STEPS @ strides):  # one sorted gather per step: fast
-            neighbours[:, column] = index[flat + step]
+    def __init__(self, coords, junction):
+        n = len(coords)
+        neighbours = sparse_voxels.neighbours(coords, _STEPS)
         self.rows = np.repeat(np.arange(n, dtype=np.int32), len(_STEPS))
         self.cols = np.where(neighbours >= 0, neighbours, self.rows.reshape(n, -1)).ravel()
-        self.coords = np.column_stack(np.unravel_index(flat, occupied.shape))
-        self.junction = np.pad(junction, 1).ravel()[flat]
+        self.coords = coords
+        self.junction = junction
         indptr = np.arange(0, len(self.cols) + 1, len(_STEPS))
         self.graph = sparse.csr_matrix((np.tile(_STEP_LENGTHS, n), self.cols, indptr),
                                        shape=(n, n))

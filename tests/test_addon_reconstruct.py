@@ -10,7 +10,7 @@ from mathutils.geometry import interpolate_bezier
 from engine.bezier import BezierSettings, distance_to_polyline
 from engine.mask_preview import mask_preview
 from engine.pipeline import PipelineSettings, reconstruct
-from engine.segmentation import SegmentationSettings, auto_colour, segment_frame
+from engine.segmentation import auto_colour, segment_frame
 from engine.synthetic_scene import SceneSpec, make_scene, write_scene
 
 

@@ -4,7 +4,7 @@ import pytest
 
 from engine.carving import CarvingSettings, carve
 from engine.carving_benchmark import graph_scores
-from engine.segment_graph import extract_segment_graph
+from engine.segment_graph import extract_segment_graph_from_voxels
 from engine.segmentation import cable_width, junction_map
 from engine.synthetic_scene import SceneSpec, make_scene
 
@@ -14,8 +14,9 @@ def _graph(spec):
     junctions = [junction_map(mask, cable_width(mask)) for mask in scene.masks]
     grid = carve(scene.cameras, scene.masks, junctions)
     core = grid.core(CarvingSettings().core_agreement)
-    graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,
-                                  voxel_size=grid.voxel_size, radius=grid.radius)
+    graph = extract_segment_graph_from_voxels(grid.index[core], grid.junction[core],
+                                              origin=grid.origin, voxel_size=grid.voxel_size,
+                                              radius=grid.radius)
     return graph_scores(graph, scene.truth)
 
 

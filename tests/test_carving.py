@@ -46,13 +46,14 @@ def test_coarse_to_fine_equals_a_full_carve(scene):
     # the same whether the distance maps are kept between levels or not, on any thread count
     again = carve(scene.cameras, scene.masks, radius=truth.radius, region=(lower, side),
                   settings=replace(settings, cache_mb=0.0, threads=1))
-    np.testing.assert_array_equal(again.occupied, coarse.occupied)
+    np.testing.assert_array_equal(again.index, coarse.index)
     assert coarse.voxel_size == pytest.approx(full.voxel_size)
-    assert coarse.occupied.sum() > 1000
+    assert len(coarse) > 1000
     assert coarse.shape == full.shape
     np.testing.assert_allclose(coarse.origin, full.origin, atol=1e-12)
-    np.testing.assert_array_equal(coarse.occupied, full.occupied)
+    np.testing.assert_array_equal(coarse.index, full.index)
     np.testing.assert_array_equal(coarse.visible, full.visible)
+    np.testing.assert_array_equal(coarse.agreement, full.agreement)
 
 
 def test_the_hull_holds_the_whole_cable_and_is_fat(scene, grid):
@@ -74,8 +75,7 @@ def test_the_hull_holds_the_whole_cable_and_is_fat(scene, grid):
 def test_junction_voxels_sit_at_the_crossings(scene, grid):
     scene, _ = scene
     truth = scene.truth
-    junctions = grid.centres(np.argwhere(grid.junction))
-    assert (grid.junction <= grid.occupied).all()
+    junctions = grid.occupied_points(grid.junction)
     crossings = np.array([truth.crossing_position(c) for c in truth.crossings])
     near, _ = cKDTree(junctions).query(crossings)
     assert near.max() < 2 * truth.radius  # every crossing has junction voxels
@@ -87,7 +87,7 @@ def test_masks_can_be_loaded_lazily(scene, grid):
     scene, junctions = scene
     lazy = carve(scene.cameras, [lambda m=m: m for m in scene.masks],
                  [lambda j=j: j for j in junctions])
-    np.testing.assert_array_equal(lazy.occupied, grid.occupied)
+    np.testing.assert_array_equal(lazy.index, grid.index)
     np.testing.assert_array_equal(lazy.junction, grid.junction)
 
 
@@ -141,17 +141,17 @@ def test_masks_that_take_in_everything_stop_at_the_memory_budget(scene):
     # the cable's own masks fit well within that budget
     grid = carve(scene.cameras, scene.masks, radius=scene.truth.radius,
                  settings=CarvingSettings(memory_mb=200))
-    assert grid.occupied.any()
+    assert len(grid)
 
 
 def test_past_the_budget_the_carve_is_coarser_and_says_so(scene):
-    from engine.carving import _BOX_BYTES, _OCCUPIED_BYTES
+    from engine.carving import _CORE_BYTES, _VOXEL_BYTES
 
     scene, _ = scene
     r = scene.truth.radius
     fine = carve(scene.cameras, scene.masks, radius=r)
-    needed = (fine.occupied.sum() * _OCCUPIED_BYTES
-              + np.prod(np.array(fine.shape) + 1.0) * _BOX_BYTES) / 2 ** 20
+    core = fine.core(CarvingSettings().core_agreement).sum()
+    needed = (len(fine) * _VOXEL_BYTES + core * _CORE_BYTES) / 2 ** 20
     coarse = carve(scene.cameras, scene.masks, radius=r,
                    settings=CarvingSettings(memory_mb=0.7 * needed))
     assert fine.voxel_size == pytest.approx(r / 3)
@@ -160,7 +160,7 @@ def test_past_the_budget_the_carve_is_coarser_and_says_so(scene):
     from scipy.spatial import cKDTree
     distance, _ = cKDTree(fine.occupied_points()).query(coarse.occupied_points())
     assert np.percentile(distance, 95) < coarse.voxel_size
-    assert 4 < fine.occupied.sum() / coarse.occupied.sum() < 12
+    assert 4 < len(fine) / len(coarse) < 12
 
 
 def test_a_packed_mask_gives_back_the_mask_in_an_eighth_of_the_memory():

@@ -14,7 +14,7 @@ from engine.ground_truth import read_ground_truth
 from engine.image_sequence import read_image
 from engine.errors import Cancelled, ReconstructionError
 from engine.metrics import evaluate
-from engine.segment_graph import SegmentGraph, extract_segment_graph
+from engine.segment_graph import SegmentGraph, extract_segment_graph_from_voxels
 from engine.segmentation import reference_frames, segment_frame, sequence_colour
 from engine.settings_cli import field_help
 from engine.synthetic_scene import SceneSpec, make_scene
@@ -348,8 +348,9 @@ def scenes():
             segs = [segment_frame(image, colour, model=model) for image in scene.images]
             grid = carve(scene.cameras, [s.mask for s in segs], [s.junctions for s in segs])
             core = grid.core(CarvingSettings().core_agreement)
-            graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,
-                                          voxel_size=grid.voxel_size, radius=grid.radius)
+            graph = extract_segment_graph_from_voxels(
+                grid.index[core], grid.junction[core], origin=grid.origin,
+                voxel_size=grid.voxel_size, radius=grid.radius)
             views = [TopologyView(c, image, s.mask, s.junctions)
                      for c, image, s in zip(scene.cameras, scene.images, segs)]
             cache[name] = scene, graph, views, grid.radius
@@ -452,8 +453,9 @@ def test_the_rendered_sample_gets_every_crossing_right_with_images_loaded_lazily
     segs = [segment_frame(image, colour, model=model) for image in images]
     grid = carve(cameras, [s.mask for s in segs], [s.junctions for s in segs])
     core = grid.core(CarvingSettings().core_agreement)
-    graph = extract_segment_graph(core, grid.junction & core, origin=grid.origin,
-                                  voxel_size=grid.voxel_size, radius=grid.radius)
+    graph = extract_segment_graph_from_voxels(grid.index[core], grid.junction[core],
+                                              origin=grid.origin, voxel_size=grid.voxel_size,
+                                              radius=grid.radius)
     views = [(c, loader(folder / "images" / c.name), s.mask, s.junctions)
              for c, s in zip(cameras, segs)]
     topology = resolve_topology(graph, views, radius=grid.radius, up=truth.up)
