@@ -119,6 +119,12 @@ class SegmentationSettings:
         miss (shading darkens a colour, it keeps its chromaticity). A cable whose
         chromaticity is within twice ``seed_shade_chroma`` of its surroundings' counts as
         colourless: neither this nor ``shade_chroma`` applies.
+    shadow_chroma, shadow_depth : float
+        A pixel the colour range or model calls cable is the cable's shadow when it is of
+        the local background's chromaticity (within ``shadow_chroma``), darker than it, and
+        lighter than the cable: its share of the background's brightness over
+        ``shadow_depth`` times that of the mask's darkest quarter (:func:`_without_shadow`);
+        ``shadow_chroma`` 0 keeps every pixel.
     """
 
     speck_area: float = 3.0
@@ -146,6 +152,8 @@ class SegmentationSettings:
     shade_reach: float = 0.75
     seed_shade_reach: float = 0.8
     seed_shade_chroma: float = 0.03
+    shadow_chroma: float = 0.02
+    shadow_depth: float = 1.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -434,6 +442,63 @@ def _shade_side(image_rgb, sure, distance, reach, settings):
     return side
 
 
+def _without_shadow(mask, image_rgb, width, settings):
+    """``mask`` without the shadow it took in (a dark cable's soft shadow is as dark as the
+    cable to a colour range or model).
+
+    A shadow is the background, darker: a mask pixel is shadow when its chromaticity is the
+    local background's (within ``shadow_chroma``; the background: the pixels up to a cable
+    width outside the mask, averaged over a few widths around the pixel), it is darker than
+    that background, and it is lighter than the cable: its brightness, as a share of the
+    background's, is over ``shadow_depth`` times that of the mask's darkest quarter. A cable
+    of the background's chromaticity and about as dark as a shadow (a grey cable on a grey
+    table) keeps every pixel; a pixel too dark for a chromaticity is kept too. ``width``: the
+    mask's width in pixels, which sizes the background's ring and neighbourhood.
+    """
+    box = _cable_box(mask, int(math.ceil(3 * width)) + 2)
+    if box is None or width == 0:
+        return mask
+    cable = mask[box]
+    # the background is smooth enough to be averaged at half size (a quarter of the cost)
+    size = (max(cable.shape[1] // 2, 1), max(cable.shape[0] // 2, 1))
+    small = cv2.resize(np.ascontiguousarray(cable).view(np.uint8), size,
+                       interpolation=cv2.INTER_AREA) > 0
+    image = cv2.resize(np.ascontiguousarray(image_rgb[box]), size,
+                       interpolation=cv2.INTER_AREA).astype(np.float32)
+    distance = cv2.distanceTransform(np.ascontiguousarray(~small).view(np.uint8),
+                                     cv2.DIST_L2, cv2.DIST_MASK_5)
+    ring = ((distance > 0.5) & (distance <= 0.5 + 0.5 * width)).astype(np.float32)
+    kernel = (2 * int(math.ceil(width)) + 1,) * 2
+    weight = cv2.blur(ring, kernel)
+    total = cv2.blur(image * ring[..., None], kernel)
+    # decided at half size too: a shadow is wide and soft
+    rows, cols = np.nonzero(small & (weight > 1e-3))
+    if not len(rows):
+        return mask
+    pixels, behind = image[rows, cols], total[rows, cols] / weight[rows, cols, None]
+    brightness = pixels.sum(axis=-1)
+    share = brightness / np.maximum(behind.sum(axis=-1), 1.0)
+    lightest = settings.shadow_depth * np.percentile(share, 25)  # the cable is darker
+    dark = (brightness >= _CHROMA_FLOOR) & (share < 1.0) & (share > lightest)
+    rows, cols = rows[dark], cols[dark]
+    shade = np.linalg.norm(_chroma(pixels[dark]) - _chroma(behind[dark]), axis=-1) \
+        < settings.shadow_chroma
+    if not shade.any():
+        return mask
+    shadow = np.zeros(small.shape, dtype=bool)
+    shadow[rows[shade], cols[shade]] = True
+    # full size: of a half-size pixel on the cable's outline, only its lighter pixels go
+    shadow = shadow.repeat(2, axis=0).repeat(2, axis=1)
+    shadow = np.pad(shadow, [(0, n - m) for n, m in zip(cable.shape, shadow.shape)], "edge")
+    rows, cols = np.nonzero(cable & shadow)
+    at = (np.minimum(rows // 2, size[1] - 1), np.minimum(cols // 2, size[0] - 1))
+    bright = image_rgb[box][rows, cols].sum(axis=-1, dtype=np.int32)
+    light = bright > lightest * total[at].sum(axis=-1) / weight[at]
+    kept = mask.copy()
+    kept[box][rows[light], cols[light]] = False
+    return kept
+
+
 def _chroma_gap(cable, surroundings):
     """The cable's median chromaticity and its distance from the surroundings' (0 when
     either has no pixel): below ``2 * seed_shade_chroma`` the cable is colourless there."""
@@ -508,6 +573,13 @@ def _cable_masks(image_rgb, colour, settings, model=None):
                       interpolation=cv2.INTER_AREA) > 0
     raw = raw > 0
     width = 2.0 * cable_width(half)
+    if settings.shadow_chroma > 0 and width > 0:
+        without = _without_shadow(raw, image_rgb, width, settings)
+        if without is not raw:  # the shadow made the cable look wider
+            raw = opened(without)
+            half = cv2.resize(raw.view(np.uint8), (raw.shape[1] // 2, raw.shape[0] // 2),
+                              interpolation=cv2.INTER_AREA) > 0
+            width = 2.0 * cable_width(half)
     if width == 0:
         return raw, raw, 0.0
     mask = _remove_specks(raw, half, settings.speck_area * width * width)

@@ -160,3 +160,64 @@ def test_the_shade_side_is_cable():
     ious = [iou(segment_frame(frame, colour, model=model).mask, truth)
             for frame, truth in zip(frames, truths)]
     assert min(ious) >= 0.97, ious
+
+
+def _cable_with_shadow(seed, *, table=(185, 150, 195), cable_colour=(22, 22, 26), shadow=0.55):
+    """A dark cable (a sine curve, 10 px) on a noisy lilac table, its soft shadow 8 px wide
+    below it: the table darkened, its chromaticity kept."""
+    rng = np.random.default_rng(seed)
+    image = np.clip(rng.normal(0, 4, (240, 320, 3)) + table, 0, 255)
+    xs = np.arange(20, 300)
+    ys = (120 + 40 * np.sin(xs / 45.0 + seed)).astype(int)
+    cable = np.zeros(image.shape[:2], bool)
+    dark = np.zeros_like(cable)
+    for x, y in zip(xs, ys):
+        cable[y - 5:y + 5, x] = True
+        dark[y + 5:y + 13, x] = True
+    dark &= ~cable
+    image[dark] *= shadow
+    image[cable] = cable_colour
+    return image.astype(np.uint8), cable, dark
+
+
+def test_a_dark_cable_s_soft_shadow_is_not_cable():
+    """A black cable's soft shadow is dark too: the table darkened, of its chromaticity,
+    leaves the mask; the cable stays whole."""
+    from engine.segmentation import SegmentationSettings, _without_shadow
+
+    for seed in range(3):
+        image, cable, dark = _cable_with_shadow(seed)
+        kept = _without_shadow(cable | dark, image, 18.0, SegmentationSettings())
+        assert (kept & cable).sum() >= 0.97 * cable.sum()
+        assert (kept & dark).sum() <= 0.1 * dark.sum()
+
+
+def test_a_rendered_black_cable_s_shadow_leaves_its_masks():
+    """A black cable on a lilac table (a tuning scene of the neutral looks): the colour model
+    takes its soft shadow in, and the masks lose most of it."""
+    from engine.segmentation import SegmentationSettings
+
+    scene = look_scene("neutral", 6, views=3, width=960, height=720)
+    colour, model = sequence_colour(list(scene.images))
+    for frame, truth in zip(scene.images, scene.masks):
+        found = segment_frame(frame, colour, model=model).mask
+        plain = segment_frame(frame, colour, SegmentationSettings(shadow_chroma=0),
+                              model=model).mask
+        assert iou(found, truth) >= iou(plain, truth) + 0.1
+        assert (found & ~truth).sum() <= 0.6 * (plain & ~truth).sum()
+
+
+@pytest.mark.parametrize("table, cable_colour, shadow", [
+    ((150, 150, 150), (70, 70, 70), 1.0),   # a grey cable on a grey table: as dark as a shadow
+    ((150, 150, 150), (200, 40, 30), 0.4),  # a red cable's own shade side is not the table's
+], ids=["grey on grey", "red shade side"])
+def test_a_cable_like_a_shadow_keeps_every_pixel(table, cable_colour, shadow):
+    from engine.segmentation import SegmentationSettings, _without_shadow
+
+    image, cable, dark = _cable_with_shadow(0, table=table, cable_colour=cable_colour,
+                                            shadow=shadow)
+    if shadow < 1.0:  # the dark band is the cable's shade side: its colour, darker
+        image[dark] = np.array(cable_colour) * shadow
+        cable = cable | dark
+    assert _without_shadow(cable, image, 18.0, SegmentationSettings()).sum() >= \
+        0.99 * cable.sum()
