@@ -506,10 +506,9 @@ def _large_pieces(index, size, min_length):
     if not len(index):
         return np.ones(0, dtype=bool)
     cells = (index - index.min(axis=0)) // 2
-    extent = tuple(cells.max(axis=0) + 1)
-    keys, voxel_cell = np.unique(np.ravel_multi_index(tuple(cells.T), extent),
-                                 return_inverse=True)
-    pooled = np.column_stack(np.unravel_index(keys, extent))
+    _, first, voxel_cell = np.unique(sparse_voxels.keys(cells), return_index=True,
+                                     return_inverse=True)
+    pooled = cells[first]
     count, labels = sparse_voxels.pieces(pooled)
     low = np.full((count, 3), np.iinfo(np.int64).max)
     high = np.full((count, 3), np.iinfo(np.int64).min)

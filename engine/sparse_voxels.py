@@ -12,7 +12,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-__all__ = ["NEIGHBOUR_STEPS", "sorted_voxels", "neighbours", "pieces"]
+__all__ = ["NEIGHBOUR_STEPS", "keys", "sorted_voxels", "neighbours", "pieces"]
 
 #: The 26 neighbour steps of a voxel, in C order (the same order as the dense gather gave).
 NEIGHBOUR_STEPS = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1)
@@ -29,6 +29,26 @@ def _keys(index):
     return (index - low) @ strides, strides
 
 
+def keys(index):
+    """One 64-bit key per voxel: equal keys, equal voxels; C order is key order.
+
+    Parameters
+    ----------
+    index : array_like of int, shape (n, 3)
+
+    Returns
+    -------
+    numpy.ndarray of int64, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        The voxels span a box of over 2^62 voxels.
+    """
+    index = np.asarray(index, dtype=np.int64).reshape(-1, 3)
+    return _keys(index)[0] if len(index) else np.zeros(0, dtype=np.int64)
+
+
 def sorted_voxels(index):
     """The order that sorts voxel indices in C order (as ``numpy.argwhere`` lists them).
 
@@ -41,11 +61,7 @@ def sorted_voxels(index):
     -------
     numpy.ndarray of int, shape (n,)
     """
-    index = np.asarray(index, dtype=np.int64).reshape(-1, 3)
-    if not len(index):
-        return np.zeros(0, dtype=np.int64)
-    keys, _ = _keys(index)
-    return np.argsort(keys, kind="stable")
+    return np.argsort(keys(index), kind="stable")
 
 
 def neighbours(index, steps=NEIGHBOUR_STEPS):
@@ -70,14 +86,14 @@ def neighbours(index, steps=NEIGHBOUR_STEPS):
     found = np.full((n, len(steps)), -1, dtype=np.int32)
     if not n:
         return found
-    keys, strides = _keys(index)
-    order = np.argsort(keys, kind="stable")
-    ordered = keys[order]
+    key, strides = _keys(index)
+    order = np.argsort(key, kind="stable")
+    ordered = key[order]
     if np.any(ordered[1:] == ordered[:-1]):
         raise ValueError("voxel indices must be distinct")
     # The box is padded by one voxel, so a step never wraps onto a voxel of another row.
     for column, step in enumerate(steps @ strides):
-        wanted = keys + step
+        wanted = key + step
         at = np.minimum(np.searchsorted(ordered, wanted), n - 1)
         found[:, column] = np.where(ordered[at] == wanted, order[at], -1)
     return found

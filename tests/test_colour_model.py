@@ -135,18 +135,24 @@ def test_real_photos_of_a_pink_cable_on_black():
     assert np.mean(ours) >= 0.90 and np.mean(ours) > np.mean(naive)
 
 
+def _sine_bands(seed, *bands, shape=(240, 320)):
+    """Masks of bands along a sine curve across a frame: each ``(start, stop)`` rows from
+    the curve."""
+    xs = np.arange(20, 300)
+    ys = (120 + 40 * np.sin(xs / 45.0 + seed)).astype(int)
+    masks = [np.zeros(shape, bool) for _ in bands]
+    for x, y in zip(xs, ys):
+        for mask, (start, stop) in zip(masks, bands):
+            mask[y + start:y + stop, x] = True
+    return masks
+
+
 def _shaded_cable_frame(seed):
     """A red cable (a sine curve) lit from above on a grey, noisy table: its lower third is
     its shade side, a third as bright, of the same chromaticity."""
     rng = np.random.default_rng(seed)
     image = np.clip(rng.normal(128, 5, (240, 320, 3)), 0, 255).astype(np.uint8)
-    xs = np.arange(20, 300)
-    ys = (120 + 40 * np.sin(xs / 45.0 + seed)).astype(int)
-    cable = np.zeros(image.shape[:2], bool)
-    shade = np.zeros_like(cable)
-    for x, y in zip(xs, ys):
-        cable[y - 5:y + 5, x] = True
-        shade[y + 2:y + 5, x] = True
+    cable, shade = _sine_bands(seed, (-5, 5), (2, 5))
     image[cable & ~shade] = (210, 45, 30)
     image[shade] = (70, 15, 10)
     return image, cable
@@ -167,13 +173,7 @@ def _cable_with_shadow(seed, *, table=(185, 150, 195), cable_colour=(22, 22, 26)
     below it: the table darkened, its chromaticity kept."""
     rng = np.random.default_rng(seed)
     image = np.clip(rng.normal(0, 4, (240, 320, 3)) + table, 0, 255)
-    xs = np.arange(20, 300)
-    ys = (120 + 40 * np.sin(xs / 45.0 + seed)).astype(int)
-    cable = np.zeros(image.shape[:2], bool)
-    dark = np.zeros_like(cable)
-    for x, y in zip(xs, ys):
-        cable[y - 5:y + 5, x] = True
-        dark[y + 5:y + 13, x] = True
+    cable, dark = _sine_bands(seed, (-5, 5), (5, 13))
     dark &= ~cable
     image[dark] *= shadow
     image[cable] = cable_colour

@@ -56,3 +56,12 @@ def test_bad_input():
         neighbours([[0, 0, 0], [2 ** 21, 2 ** 21, 2 ** 21]])
     with pytest.raises(ValueError, match="-1, 0, 1"):
         neighbours([[0, 0, 0]], steps=[[2, 0, 0]])
+
+
+def test_keys_follow_c_order_and_tell_voxels_apart():
+    from engine.sparse_voxels import keys
+
+    _, index = _random_voxels(3)
+    found = keys(index)
+    assert np.all(np.diff(found) > 0)  # argwhere's C order is key order
+    assert keys(np.zeros((0, 3), int)).shape == (0,)
