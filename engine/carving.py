@@ -183,13 +183,6 @@ class VoxelGrid:
         """The voxels' box with one empty voxel of margin on each side."""
         return tuple(int(n) for n in self.index.max(axis=0) + 2) if len(self) else (1, 1, 1)
 
-    def dense(self, which=None):
-        """The occupied voxels (those where ``which`` is True) as a bool grid of
-        :attr:`shape`: for small grids and tests, it costs a byte per voxel of the box."""
-        grid = np.zeros(self.shape, dtype=bool)
-        grid[tuple((self.index if which is None else self.index[which]).T)] = True
-        return grid
-
 
 def _radius_in_view(camera, mask, centre):
     """Half the cable's width in ``mask`` at the depth of ``centre``, in world units (None if
