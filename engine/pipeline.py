@@ -29,6 +29,7 @@ from .colmap_model import read_colmap_model
 from .errors import InputError, ReconstructionError
 from .image_sequence import open_image_sequence, read_image
 from .mask_agreement import MaskAgreementSettings, agree_masks
+from .mask_checks import MaskCheckSettings, core_thickness, mask_warnings, unexplained_share
 from .metrics import Similarity
 from .packed_mask import PackedMask, unpacked
 from .progress import StageProgress, check_cancel
@@ -72,6 +73,8 @@ class PipelineSettings:
     upright : UprightSettings
         How the world is put upright when the cameras come from a model (estimated cameras
         are put upright by the estimation).
+    checks : MaskCheckSettings
+        When the run warns that its masks held more than the cable.
     reference_frame : int
         Frame the automatic cable colour is taken from.
     """
@@ -84,6 +87,7 @@ class PipelineSettings:
     topology: TopologySettings = field(default_factory=TopologySettings)
     fit: RodFitSettings = field(default_factory=RodFitSettings)
     upright: UprightSettings = field(default_factory=UprightSettings)
+    checks: MaskCheckSettings = field(default_factory=MaskCheckSettings)
     reference_frame: int = 0
 
 
@@ -628,6 +632,11 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
     clock.done()
     if graph.n_segments == 0:
         raise ReconstructionError("no cable segment could be found in the carved volume")
+    length = sum(float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+                 for *_, points in graph.segments())
+    thickness = core_thickness(int(np.count_nonzero(core)), grid.voxel_size, grid.radius, length)
+    log.info("carved core: %.2f times a tube's volume", thickness)
+    warnings = list(warnings) + mask_warnings(thickness=thickness, settings=settings.checks)
     stage = clock.stage("topology")
     topology = resolve_topology(graph, views, radius=grid.radius, up=up,
                                 settings=settings.topology, progress=stage, cancel=cancel)
@@ -648,6 +657,10 @@ def _finish(fits, crossings, state, clock):
         radius = state.carved_radius
         warnings.append("the cable's radius could not be measured in the frames: it is the "
                         "carving's estimate")
+    if state.settings.checks.unexplained > 0:
+        shares = unexplained_share([(fit.points, fit.closed) for fit in fits], radius,
+                                   state.views, band=state.settings.checks.band)
+        warnings.extend(mask_warnings(shares=shares, settings=state.settings.checks))
     scale = _scale_factor(fits, radius, state.diameter, state.length)
     cameras = [view.camera for view in state.views]
     units = "model"

@@ -15,6 +15,7 @@ from pathlib import Path
 from .benchmarks import DEFAULT_SAMPLE, in_fresh_process
 from .errors import ReconstructionError
 from .ground_truth import read_ground_truth
+from .mask_checks import CHECK_HINT
 from .synthetic_scene import SceneSpec, make_scene, write_scene
 
 __all__ = ["bench_pipeline", "pipeline_suite", "bench_pipeline_looks", "scored_run"]
@@ -73,7 +74,8 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None):
            "crossings": f"{metrics.crossings_right}/{metrics.crossings_total}",
            "one_path": "yes" if metrics.one_path else "no",
            "radius_error": metrics.radius_error,
-           "confident_right": _confident_right(metrics)}
+           "confident_right": _confident_right(metrics),
+           "masks_warned": "yes" if any(CHECK_HINT in w for w in result.warnings) else "no"}
     row.update({f"{stage}_s": result.timings.get(stage, 0.0) for stage in _STAGE_COLUMNS})
     row["total_s"] = total
     return row
@@ -131,8 +133,8 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, progress=
 
 
 _LOOK_COLUMNS = ("looks", "set", "scene", "masks", "accuracy_mean", "accuracy_p95",
-                 "completeness", "crossings", "one_path", "radius_error", "masks_s",
-                 "agreement_s", "total_s", "error")
+                 "completeness", "crossings", "one_path", "radius_error", "masks_warned",
+                 "masks_s", "agreement_s", "total_s", "error")
 
 
 def _write_naive_masks(images, out):

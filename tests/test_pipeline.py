@@ -54,6 +54,7 @@ def test_one_path_through_every_crossing_with_true_cameras(capture, result):
     assert set(result.timings) == {"masks", "cameras", "agreement", "carving", "graph",
                                    "topology", "fit"}
     assert calls[-1] == pytest.approx(1.0) and all(a <= b + 1e-9 for a, b in zip(calls, calls[1:]))
+    assert not [w for w in result.warnings if "python -m engine segment" in w]  # masks fine
 
 
 def test_flipping_a_crossing_refits_only_the_final_rod(capture, result):
@@ -113,6 +114,27 @@ def test_given_masks_are_used_and_a_missing_one_is_named(capture, tmp_path):
     (masks / "005.png").unlink()
     with pytest.raises(InputError, match="005.png"):
         reconstruct(folder / "images", cameras=folder / "sparse", masks=masks)
+
+
+def test_masks_that_take_in_the_table_say_so(capture, tmp_path):
+    folder, scene = capture
+    masks = tmp_path / "masks"
+    shutil.copytree(folder / "masks", masks)
+    # a square of the table 16 r wide around the middle of the cable, in every view's mask
+    middle = scene.truth.centreline[len(scene.truth.centreline) // 2]
+    side = 8 * scene.truth.radius
+    corners = np.array([[middle[0] + dx, middle[1] + dy, 0.0]
+                        for dx, dy in ((-side, -side), (side, -side), (side, side),
+                                       (-side, side))])
+    for camera in scene.truth.cameras:
+        path = masks / (camera.name.rsplit(".", 1)[0] + ".png")
+        mask = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        pixels, _ = camera.project(corners)
+        cv2.fillConvexPoly(mask, np.round(pixels - 0.5).astype(np.int32), 255)
+        cv2.imwrite(str(path), mask)
+    result = reconstruct(folder / "images", cameras=folder / "sparse", masks=masks)
+    said = [w for w in result.warnings if "python -m engine segment" in w]
+    assert said and any("more than a cable" in w or "away from the curve" in w for w in said)
 
 
 def test_no_cable_anywhere_fails_with_a_reason(capture, tmp_path):

@@ -1,0 +1,171 @@
+"""Checks that the masks held the cable and nothing else: a run warns when they did not.
+
+Masks that take in part of the table, a shadow or another object still carve, and the
+reconstruction then ends in a curve that follows something other than the cable. Two
+measures tell such runs apart from good ones without the truth:
+
+* :func:`core_thickness`: the carved core's volume over that of a tube of the carved radius
+  along the segment graph. A cable's core is a tube a little fatter than the cable (the hull
+  is fat); masks that take in a patch of the table carve a slab.
+* :func:`unexplained_share`: the share of the masks' pixels that lie away from the fitted
+  curve's projection. A stray object or shadow that the other views carve too (so the
+  agreement step keeps it) but that the curve does not follow stays in the masks.
+
+Thresholds chosen on the tuning looks (8 families, seeds 0-2, 24 views at 960x720, true
+cameras; our masks, the naive threshold's and the exact ones; 57 runs that finished): the 43
+runs with one path and the exact masks' crossings had a thickness of 1.15-1.37 and at most
+0.3% of the mask unexplained; 13 of the 14 wrong ones had a thickness of 14-1766 (a slab) or
+2.4-97% unexplained. The one missed lost a stretch of the cable from its masks (nothing in
+them to explain). On the held-out Cycles captures of ``samples/looks`` the exact masks give
+1.29-1.57 (fewer, lower views carve a fatter hull) and 0.0%, and the three wrong runs are
+flagged (4.8-54% unexplained). The thickness threshold was first 1.6, just over the tuning
+runs; it was raised to 2.5 (still far under every slab) after those captures showed 1.57, so
+they are no clean held-out test of it.
+"""
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .packed_mask import unpacked
+
+__all__ = ["CHECK_HINT", "MaskCheckSettings", "core_thickness", "unexplained_share", "mask_warnings"]
+
+#: Every warning of these checks ends with this advice.
+CHECK_HINT = "check them with `python -m engine segment`"
+
+
+@dataclass(frozen=True)
+class MaskCheckSettings:
+    """When a run says its masks held more than the cable.
+
+    Attributes
+    ----------
+    core_thickness : float
+        Warn when the carved core holds more than this many times the volume of a tube of
+        the carved radius along the segment graph (0 turns the check off).
+    unexplained : float
+        Warn when, on average over the views, more than this share of the mask pixels lie
+        outside the band around the fitted curve's projection (0 turns the check off).
+    band : float
+        The band's half-width in projected radii (plus one pixel): the hull is fat and the
+        mask's outline a pixel off, so the band is wider than the cable.
+    """
+
+    core_thickness: float = 2.5
+    unexplained: float = 0.02
+    band: float = 1.5
+
+    def __post_init__(self):
+        for name in ("core_thickness", "unexplained", "band"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+
+
+def core_thickness(core_voxels, voxel_size, radius, length):
+    """The carved core's volume over that of a tube of ``radius`` and ``length``.
+
+    Parameters
+    ----------
+    core_voxels : int
+        Voxels in the core the segment graph was extracted from.
+    voxel_size, radius, length : float
+        In world units; ``length`` is the segment graph's total length.
+
+    Returns
+    -------
+    float
+        ``inf`` for a core with no length.
+    """
+    tube = np.pi * radius ** 2 * length
+    if not tube > 0:
+        return float("inf")
+    return float(core_voxels * voxel_size ** 3 / tube)
+
+
+def unexplained_share(paths, radius, views, *, band=1.5):
+    """Per view, the share of the mask's pixels away from the curve's projection.
+
+    Parameters
+    ----------
+    paths : sequence of (ndarray (N, 3), bool)
+        The fitted centrelines and whether each is closed.
+    radius : float
+        The cable's radius, world units.
+    views : sequence of View
+        Registered frames with their (packed) masks.
+    band : float, optional
+        Half-width of the band around the projected centreline that explains a pixel, in
+        projected radii (at the view's median depth), plus one pixel.
+
+    Returns
+    -------
+    list of (str, float)
+        ``(frame name, share)`` for each view with cable pixels.
+    """
+    shares = []
+    for view in views:
+        mask = unpacked(view.mask)
+        count = int(np.count_nonzero(mask))
+        if not count:
+            continue
+        camera = view.camera
+        explained = np.zeros(mask.shape, np.uint8)
+        depths = []
+        projected = []
+        for points, closed in paths:
+            pixels, depth = camera.project(np.asarray(points, dtype=float))
+            projected.append((pixels, depth, closed))
+            depths.append(depth[depth > 0])
+        depths = np.concatenate(depths) if depths else np.zeros(0)
+        if not len(depths):
+            shares.append((camera.name, 1.0))
+            continue
+        pixel_radius = radius * float(np.mean(camera.focal)) / float(np.median(depths))
+        thickness = max(3, int(round(2 * (band * pixel_radius + 1))))
+        for pixels, depth, closed in projected:
+            # cv2 draws with 4 fractional bits; COLMAP's pixel centres are at +0.5
+            fixed = np.round(np.nan_to_num(pixels - 0.5) * 16).astype(np.int64)
+            start = 0
+            behind = np.flatnonzero(~(depth > 0)).tolist()
+            for end in behind + [len(fixed)]:
+                if end - start >= 2:
+                    cv2.polylines(explained, [fixed[start:end].reshape(-1, 1, 2)],
+                                  closed and not behind, 1, thickness, cv2.LINE_8, shift=4)
+                start = end + 1
+        away = np.count_nonzero(mask & (explained == 0))
+        shares.append((camera.name, away / count))
+    return shares
+
+
+def mask_warnings(*, thickness=None, shares=(), settings=MaskCheckSettings()):
+    """The warnings :func:`core_thickness` and :func:`unexplained_share` call for.
+
+    Parameters
+    ----------
+    thickness : float, optional
+    shares : sequence of (str, float), optional
+    settings : MaskCheckSettings, optional
+
+    Returns
+    -------
+    list of str
+    """
+    warnings = []
+    check = ": " + CHECK_HINT
+    if (thickness is not None and settings.core_thickness > 0
+            and thickness > settings.core_thickness):
+        warnings.append(f"the masks take in more than a cable: what they carve holds "
+                        f"{thickness:.1f} times the volume of a tube along it (a shadow, part "
+                        f"of the table or another object?)" + check)
+    if shares and settings.unexplained > 0:
+        mean = float(np.mean([share for _, share in shares]))
+        if mean > settings.unexplained:
+            name, worst = max(shares, key=lambda item: item[1])
+            warnings.append(f"{100 * mean:.0f}% of the mask pixels lie away from the curve "
+                            f"({100 * worst:.0f}% in {name}): the masks hold something "
+                            f"besides the cable, or part of the cable was not reconstructed"
+                            + check)
+    return warnings
