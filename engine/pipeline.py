@@ -432,6 +432,9 @@ class Reconstruction:
         The cameras were estimated (so the scale is arbitrary unless asked for).
     colour : tuple of float or None
         The cable's colour (sRGB, 0 to 1).
+    checks : dict
+        The masks' checks (:mod:`.mask_checks`): ``"core_thickness"`` and ``"unexplained"``
+        (the mean share of mask pixels away from the curve).
     """
 
     result: Result
@@ -447,6 +450,7 @@ class Reconstruction:
     length: float = None
     estimated: bool = False
     colour: tuple = None
+    checks: dict = field(default_factory=dict)
 
     def flip(self, index, *, progress=None, cancel=None):
         """The same reconstruction with crossing ``index`` flipped and the final fit re-run.
@@ -474,8 +478,8 @@ class Reconstruction:
         fits, crossings = _fit_paths(self.topology, self.evidence, self.voxels,
                                      self.carved_radius, self.up, self.settings, stage, cancel)
         clock.done()
-        result = _finish(fits, crossings, self, clock)
-        return replace(self, result=result)
+        result, unexplained = _finish(fits, crossings, self, clock)
+        return replace(self, result=result, checks={**self.checks, "unexplained": unexplained})
 
 
 def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diameter=None,
@@ -567,8 +571,8 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
             agreed = {view.camera.name: view.mask for view in views}
             frame_masks = [agreed.get(name, mask)
                            for name, mask in zip(sequence.names, frame_masks)]
-        grid, topology, warnings = _carve_and_resolve(views, up, clock, settings, cancel,
-                                                      warnings)
+        grid, topology, warnings, thickness = _carve_and_resolve(views, up, clock, settings,
+                                                                 cancel, warnings)
         reference = min(settings.reference_frame, len(sequence) - 1)
         order = [reference] + [k for k in range(len(sequence)) if k != reference]
         number = next((k for k in order if frame_masks[k].any()), reference)
@@ -582,7 +586,7 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         result=None, views=tuple(views), topology=topology, evidence=tuple(evidence),
         voxels=voxels, carved_radius=grid.radius, up=up, settings=settings,
         warnings=tuple(warnings), diameter=diameter, length=length,
-        estimated=cameras is None, colour=colour_seen)
+        estimated=cameras is None, colour=colour_seen, checks={"core_thickness": thickness})
     return state._fitted(clock, stage, cancel)
 
 
@@ -636,12 +640,13 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
                  for *_, points in graph.segments())
     thickness = core_thickness(int(np.count_nonzero(core)), grid.voxel_size, grid.radius, length)
     log.info("carved core: %.2f times a tube's volume", thickness)
-    warnings = list(warnings) + mask_warnings(thickness=thickness, settings=settings.checks)
+    # the masks' warnings first: the likeliest cause of the others, and what a user can mend
+    warnings = mask_warnings(thickness=thickness, settings=settings.checks) + list(warnings)
     stage = clock.stage("topology")
     topology = resolve_topology(graph, views, radius=grid.radius, up=up,
                                 settings=settings.topology, progress=stage, cancel=cancel)
     clock.done()
-    return grid, topology, list(warnings) + list(topology.warnings)
+    return grid, topology, list(warnings) + list(topology.warnings), thickness
 
 
 def _finish(fits, crossings, state, clock):
@@ -657,10 +662,10 @@ def _finish(fits, crossings, state, clock):
         radius = state.carved_radius
         warnings.append("the cable's radius could not be measured in the frames: it is the "
                         "carving's estimate")
-    if state.settings.checks.unexplained > 0:
-        shares = unexplained_share([(fit.points, fit.closed) for fit in fits], radius,
-                                   state.views, band=state.settings.checks.band)
-        warnings.extend(mask_warnings(shares=shares, settings=state.settings.checks))
+    shares = unexplained_share([(fit.points, fit.closed) for fit in fits], radius, state.views,
+                               band=state.settings.checks.band)
+    unexplained = float(np.mean([share for _, share in shares])) if shares else 0.0
+    warnings = mask_warnings(shares=shares, settings=state.settings.checks) + warnings
     scale = _scale_factor(fits, radius, state.diameter, state.length)
     cameras = [view.camera for view in state.views]
     units = "model"
@@ -679,4 +684,5 @@ def _finish(fits, crossings, state, clock):
     paths = [CablePath(points, closed=fit.closed) for points, fit in zip(fits_points, fits)]
     clock.progress(1.0, "done")
     return Result(radius=radius, paths=paths, crossings=crossings, cameras=cameras, units=units,
-                  warnings=warnings, timings=dict(clock.timings), colour=state.colour)
+                  warnings=warnings, timings=dict(clock.timings),
+                  colour=state.colour), unexplained

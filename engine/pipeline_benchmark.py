@@ -52,22 +52,23 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None):
     import resource
 
     from .metrics import evaluate
-    from .pipeline import reconstruct
+    from .pipeline import run_reconstruction
 
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
     truth = read_ground_truth(truth_file)
     folder = Path(folder)
     started = time.perf_counter()
     try:
-        result = reconstruct(folder / "images",
-                             cameras=folder / "sparse" if use_true_cameras else None,
-                             masks=masks)
+        state = run_reconstruction(folder / "images",
+                                   cameras=folder / "sparse" if use_true_cameras else None,
+                                   masks=masks)
     except (ReconstructionError, ValueError, MemoryError) as error:
         return {"error": str(error)[:80], "total_s": time.perf_counter() - started}
     except Exception as error:  # a bug: the row says so, the bench goes on
         return {"error": f"bug: {type(error).__name__}: {error}"[:80],
                 "total_s": time.perf_counter() - started}
     total = time.perf_counter() - started
+    result = state.result
     metrics = evaluate(result, truth, align=not use_true_cameras)
     row = {"accuracy_mean": metrics.accuracy_mean, "accuracy_p95": metrics.accuracy_p95,
            "completeness": metrics.completeness,
@@ -75,6 +76,8 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None):
            "one_path": "yes" if metrics.one_path else "no",
            "radius_error": metrics.radius_error,
            "confident_right": _confident_right(metrics),
+           "core_thickness": state.checks["core_thickness"],
+           "unexplained": state.checks["unexplained"],
            "masks_warned": "yes" if any(CHECK_HINT in w for w in result.warnings) else "no"}
     row.update({f"{stage}_s": result.timings.get(stage, 0.0) for stage in _STAGE_COLUMNS})
     row["total_s"] = total
@@ -133,7 +136,8 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, progress=
 
 
 _LOOK_COLUMNS = ("looks", "set", "scene", "masks", "accuracy_mean", "accuracy_p95",
-                 "completeness", "crossings", "one_path", "radius_error", "masks_warned",
+                 "completeness", "crossings", "one_path", "radius_error", "core_thickness",
+                 "unexplained", "masks_warned",
                  "masks_s", "agreement_s", "total_s", "error")
 
 

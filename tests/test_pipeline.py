@@ -42,9 +42,10 @@ def run_engine(*args):
 
 def test_one_path_through_every_crossing_with_true_cameras(capture, result):
     _, scene = capture
-    result, calls, _ = result
+    result, calls, state = result
     metrics = evaluate(result, scene.truth)
     assert len(result.paths) == 1 and metrics.one_path
+    assert 1.0 < state.checks["core_thickness"] < 2.0 and state.checks["unexplained"] < 0.01
     assert metrics.crossings_right == metrics.crossings_total == 2
     assert all(c.confidence > 0.5 for c in result.crossings)
     assert metrics.completeness > 0.95
@@ -135,6 +136,7 @@ def test_masks_that_take_in_the_table_say_so(capture, tmp_path):
     result = reconstruct(folder / "images", cameras=folder / "sparse", masks=masks)
     said = [w for w in result.warnings if "python -m engine segment" in w]
     assert said and any("more than a cable" in w or "away from the curve" in w for w in said)
+    assert result.warnings[0] in said  # first: the panel's summary shows the first one
 
 
 def test_no_cable_anywhere_fails_with_a_reason(capture, tmp_path):
