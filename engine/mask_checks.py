@@ -30,7 +30,8 @@ import numpy as np
 
 from .packed_mask import unpacked
 
-__all__ = ["CHECK_HINT", "MaskCheckSettings", "core_thickness", "unexplained_share", "mask_warnings"]
+__all__ = ["CHECK_HINT", "MaskCheckSettings", "core_thickness", "unexplained_share",
+           "mask_warnings"]
 
 #: Every warning of these checks ends with this advice.
 CHECK_HINT = "check them with `python -m engine segment`"
