@@ -127,8 +127,10 @@ def unexplained_share(paths, radius, views, *, band=1.5):
         pixel_radius = radius * float(np.mean(camera.focal)) / float(np.median(depths))
         thickness = max(3, int(round(2 * (band * pixel_radius + 1))))
         for pixels, depth, closed in projected:
-            # cv2 draws with 4 fractional bits; COLMAP's pixel centres are at +0.5
-            fixed = np.round(np.nan_to_num(pixels - 0.5) * 16).astype(np.int64)
+            # cv2 draws with 4 fractional bits; COLMAP's pixel centres are at +0.5; a point
+            # near the camera's plane projects far out, kept within cv2's int32
+            fixed = np.clip(np.round(np.nan_to_num(pixels - 0.5) * 16), -2 ** 30, 2 ** 30)
+            fixed = fixed.astype(np.int32)
             start = 0
             behind = np.flatnonzero(~(depth > 0)).tolist()
             for end in behind + [len(fixed)]:
