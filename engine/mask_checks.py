@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .overlay import draw_projected
 from .packed_mask import unpacked
 
 __all__ = ["CHECK_HINT", "MaskCheckSettings", "core_thickness", "unexplained_share",
@@ -113,31 +114,19 @@ def unexplained_share(paths, radius, views, *, band=1.5):
         if not count:
             continue
         camera = view.camera
-        explained = np.zeros(mask.shape, np.uint8)
-        depths = []
-        projected = []
-        for points, closed in paths:
-            pixels, depth = camera.project(np.asarray(points, dtype=float))
-            projected.append((pixels, depth, closed))
-            depths.append(depth[depth > 0])
-        depths = np.concatenate(depths) if depths else np.zeros(0)
+        depths = np.concatenate([np.zeros(0)] + [camera.project(np.asarray(p, dtype=float))[1]
+                                                 for p, _ in paths])
+        depths = depths[depths > 0]
         if not len(depths):
             shares.append((camera.name, 1.0))
             continue
         pixel_radius = radius * float(np.mean(camera.focal)) / float(np.median(depths))
         thickness = max(3, int(round(2 * (band * pixel_radius + 1))))
-        for pixels, depth, closed in projected:
-            # cv2 draws with 4 fractional bits; COLMAP's pixel centres are at +0.5; a point
-            # near the camera's plane projects far out, kept within cv2's int32
-            fixed = np.clip(np.round(np.nan_to_num(pixels - 0.5) * 16), -2 ** 30, 2 ** 30)
-            fixed = fixed.astype(np.int32)
-            start = 0
-            behind = np.flatnonzero(~(depth > 0)).tolist()
-            for end in behind + [len(fixed)]:
-                if end - start >= 2:
-                    cv2.polylines(explained, [fixed[start:end].reshape(-1, 1, 2)],
-                                  closed and not behind, 1, thickness, cv2.LINE_8, shift=4)
-                start = end + 1
+        explained = np.zeros(mask.shape, np.uint8)
+        for points, closed in paths:
+            points = np.asarray(points, dtype=float)
+            draw_projected(explained, camera, np.vstack([points, points[:1]]) if closed
+                           else points, 1, thickness, line_type=cv2.LINE_8)
         away = np.count_nonzero(mask & (explained == 0))
         shares.append((camera.name, away / count))
     return shares

@@ -3,21 +3,39 @@
 import cv2
 import numpy as np
 
-__all__ = ["draw_overlay"]
+__all__ = ["draw_overlay", "draw_projected"]
 
 _PATH, _OVER, _UNDER = (255, 220, 0), (40, 220, 40), (40, 120, 255)  # RGB
 
 
-def _polyline(image, camera, points, colour, thickness):
+def draw_projected(image, camera, points, colour, thickness, *, line_type=cv2.LINE_AA):
+    """Draw a 3D polyline's projection into ``image`` (in place), broken where it passes
+    behind the camera.
+
+    Parameters
+    ----------
+    image : ndarray
+        The frame's size (one or three channels).
+    camera : Camera
+    points : array_like, shape (N, 3)
+        In order; repeat the first point at the end for a closed curve.
+    colour : int or tuple
+    thickness : int
+        Pixels.
+    line_type : int, optional
+        ``cv2.LINE_AA`` (smooth) or ``cv2.LINE_8`` (hard-edged, for masks).
+    """
     pixels, depth = camera.project(np.asarray(points, dtype=float))
     visible = depth > 0
-    # cv2 draws with 4 fractional bits; COLMAP's pixel centres are at +0.5
-    fixed = np.round((pixels - 0.5) * 16).astype(np.int64)
+    # cv2 draws with 4 fractional bits; COLMAP's pixel centres are at +0.5; a point near the
+    # camera's plane projects far out, kept within cv2's int32
+    fixed = np.clip(np.round(np.nan_to_num(pixels - 0.5) * 16), -2 ** 30, 2 ** 30)
+    fixed = fixed.astype(np.int32)
     start = 0
-    for end in np.flatnonzero(~visible).tolist() + [len(points)]:
+    for end in np.flatnonzero(~visible).tolist() + [len(fixed)]:
         if end - start >= 2:
             cv2.polylines(image, [fixed[start:end].reshape(-1, 1, 2)], False, colour,
-                          thickness, cv2.LINE_AA, shift=4)
+                          thickness, line_type, shift=4)
         start = end + 1
 
 
@@ -50,13 +68,13 @@ def draw_overlay(image, result, camera, *, thickness=2):
     canvas = np.ascontiguousarray(image).copy()
     for path in result.paths:
         points = np.vstack([path.points, path.points[:1]]) if path.closed else path.points
-        _polyline(canvas, camera, points, _PATH, thickness)
+        draw_projected(canvas, camera, points, _PATH, thickness)
     span = 4.0 * result.radius
     for crossing in result.crossings:
         under = _stretch(result.paths[crossing.under.path], crossing.under.index, span)
         over = _stretch(result.paths[crossing.over.path], crossing.over.index, span)
-        _polyline(canvas, camera, under, _UNDER, thickness + 2)
-        _polyline(canvas, camera, over, _OVER, thickness + 2)
+        draw_projected(canvas, camera, under, _UNDER, thickness + 2)
+        draw_projected(canvas, camera, over, _OVER, thickness + 2)
         (u, v), depth = camera.project(crossing.position)
         if depth > 0:
             cv2.putText(canvas, f"{crossing.confidence:.2f}", (int(u) + 12, int(v) - 12),

@@ -636,8 +636,7 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
     clock.done()
     if graph.n_segments == 0:
         raise ReconstructionError("no cable segment could be found in the carved volume")
-    length = sum(float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
-                 for *_, points in graph.segments())
+    length = sum(_polyline_length(points, False) for *_, points in graph.segments())
     thickness = core_thickness(int(np.count_nonzero(core)), grid.voxel_size, grid.radius, length)
     log.info("carved core: %.2f times a tube's volume", thickness)
     # the masks' warnings first: the likeliest cause of the others, and what a user can mend
