@@ -78,3 +78,16 @@ def test_a_thick_core_warns_and_a_tube_does_not():
     assert 1.57 < settings.core_thickness < 14  # exact masks vs a slab (module notes)
     with pytest.raises(ValueError, match="band"):
         MaskCheckSettings(band=-1.0)
+
+
+def test_a_core_thinner_than_a_tube_warns():
+    settings = MaskCheckSettings()
+    assert mask_warnings(thickness=1.13) == []  # the thinnest right run on the tuning looks
+    warning, = mask_warnings(thickness=0.83)
+    assert "disagree across views" in warning and "0.83 times" in warning
+    assert warning.endswith("python -m engine segment`")
+    assert mask_warnings(thickness=0.5, settings=MaskCheckSettings(thin_core=0)) == []
+    assert 0.97 < settings.thin_core < 1.13  # wrong and right tuning runs (module notes)
+    with pytest.raises(ValueError, match="under core_thickness"):
+        MaskCheckSettings(thin_core=3.0)
+    assert MaskCheckSettings(thin_core=3.0, core_thickness=0).thin_core == 3.0

@@ -139,6 +139,18 @@ def test_masks_that_take_in_the_table_say_so(capture, tmp_path):
     assert result.warnings[0] in said  # first: the panel's summary shows the first one
 
 
+def test_masks_thinned_in_half_the_views_say_they_disagree(capture, tmp_path):
+    folder, _ = capture
+    masks = tmp_path / "masks"
+    shutil.copytree(folder / "masks", masks)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
+    for path in sorted(masks.iterdir())[::2]:  # every other view loses 2 pixels a side
+        cv2.imwrite(str(path), cv2.erode(cv2.imread(str(path), cv2.IMREAD_GRAYSCALE), disc))
+    state = run_reconstruction(folder / "images", cameras=folder / "sparse", masks=masks)
+    assert state.checks["core_thickness"] < 0.95
+    assert "disagree across views" in state.result.warnings[0]  # first, as the panel shows
+
+
 def test_no_cable_anywhere_fails_with_a_reason(capture, tmp_path):
     folder, _ = capture
     images = tmp_path / "images"
