@@ -30,8 +30,7 @@ from scipy.ndimage import gaussian_filter
 from .colour_range import ColourRange, hsv_image
 from .errors import ReconstructionError
 
-__all__ = ["ColourModel", "find_cable", "range_of", "thin_pieces", "thickest", "reduced",
-           "colour_candidates",
+__all__ = ["ColourModel", "find_cable", "range_of", "thin_pieces", "reduced", "colour_candidates",
            "CableCandidate", "opened"]
 
 #: Frames are clustered and scored at this size (the longer side, pixels); larger frames are
@@ -97,34 +96,6 @@ def thin_pieces(mask, *, min_elongation=8.0, min_area=12):
     thin = (elongation >= min_elongation) & (area >= min_area)
     thin[0] = False
     return labels, thin, half_width, area
-
-
-def thickest(mask, labels, pieces, stats=None):
-    """The radius of the largest disc inside each of some pieces of a mask.
-
-    Parameters
-    ----------
-    mask : ndarray of bool
-    labels : ndarray of int32
-        Its connected pieces (:func:`thin_pieces`).
-    pieces : sequence of int
-        The labels to measure.
-    stats : ndarray, optional
-        ``cv2.connectedComponentsWithStats``'s statistics of ``labels`` (their boxes).
-
-    Returns
-    -------
-    ndarray, shape (len(pieces),)
-    """
-    if stats is None:
-        stats = cv2.connectedComponentsWithStats(mask.view(np.uint8), 8, cv2.CV_32S)[2]
-    radii = np.zeros(len(pieces))
-    for index, piece in enumerate(pieces):
-        x, y, w, h = stats[piece, :4]
-        box = np.pad(labels[y:y + h, x:x + w] == piece, 1)
-        radii[index] = cv2.distanceTransform(box.view(np.uint8), cv2.DIST_L2,
-                                             cv2.DIST_MASK_5).max()
-    return radii
 
 
 def _score(mask, lab, diagonal):
@@ -387,9 +358,10 @@ def model_space(image_rgb):
     does not change) and brightness, each 0-255 (uint8, three channels)."""
     image = np.ascontiguousarray(image_rgb)
     total = cv2.transform(image.astype(np.float32), np.ones((1, 3), np.float32))
-    share = 255.0 / np.maximum(total, 1.0)
-    red = cv2.multiply(image[..., 0], share, dtype=cv2.CV_8U)
-    green = cv2.multiply(image[..., 1], share, dtype=cv2.CV_8U)
+    share = cv2.divide(255.0, total)  # 0 where the total is 0 (so are red and green)
+    red, green, _ = cv2.split(image)  # contiguous planes multiply faster than views
+    red = cv2.multiply(red, share, dtype=cv2.CV_8U)
+    green = cv2.multiply(green, share, dtype=cv2.CV_8U)
     brightness = cv2.convertScaleAbs(total, alpha=1.0 / 3.0)
     return cv2.merge([red, green, brightness])
 
