@@ -4,8 +4,8 @@ Each bench returns rows (dicts) and :func:`format_table` prints them; nothing he
 inside a test.
 """
 
-import multiprocessing
 import math
+import multiprocessing
 import resource
 import time
 from concurrent.futures import ProcessPoolExecutor

@@ -1,12 +1,14 @@
 """``python -m engine bench carve``: voxel carving and the segment graph on ground-truth scenes.
 
 Each scene's masks (segmented from its images, as a user's would be) and junction maps are
-written as PNG files and carved by a fresh process that reads them one at a time (on a grid of
-256 voxels along the longest side of the cable's box, the issue's measure), so the peak
+written as PNG files and carved by a fresh process that reads them one at a time, so the peak
 memory of a row is that process's whole peak (interpreter and libraries included). A row gives
 the carving and graph times, the grid, the graph against the truth (junctions of degree 4 at
 the crossings, segments 2N+1 for an open cable) and how far the segments' centrelines lie from
-the true one, in radii. The last row carves 200 views of 3840x2880 for memory alone.
+the true one, in radii. Each scene has two rows: *ours*, carved as a reconstruction carves
+(the radius estimated from the masks, the voxel size the settings' own), and an *oracle* row
+fed the truth (256 voxels along the longest side of the cable's box, the issue's measure, with
+the true radius). The last row carves 200 views of 3840x2880 for memory alone.
 """
 
 import tempfile
@@ -121,9 +123,16 @@ def _scene_rows(specs, settings, folder, cells):
         place.mkdir()
         paths = _write_masks(place, [s.mask for s in segmentations],
                              [s.junctions for s in segmentations])
-        row = {"scene": label, "views": spec.views, "size": f"{spec.width}x{spec.height}"}
-        row.update(in_fresh_process(_carve_row, scene.cameras, paths, scene.truth, settings, 1, cells))
-        rows.append(row)
+        # as a reconstruction carves (the radius estimated, the grid its own), and beside
+        # it the grid the issue measured, set from the true radius
+        for grid, size in (("ours", 0), (f"oracle: true radius, {cells} across", cells)):
+            if grid != "ours" and not cells:
+                continue
+            row = {"scene": label, "grid_from": grid, "views": spec.views,
+                   "size": f"{spec.width}x{spec.height}"}
+            row.update(in_fresh_process(_carve_row, scene.cameras, paths, scene.truth, settings,
+                                        1, size))
+            rows.append(row)
     return rows
 
 
@@ -142,7 +151,7 @@ def _memory_row(settings, folder, views=200):
                               camera.height * _MEMORY_SCALE, camera.model, params,
                               camera.R, camera.t))
     truth = truth.with_cameras(())
-    row = {"scene": "memory: table 3", "views": len(big),
+    row = {"scene": "memory: table 3", "grid_from": "ours", "views": len(big),
            "size": f"{960 * _MEMORY_SCALE}x{720 * _MEMORY_SCALE}"}
     row.update(in_fresh_process(_carve_row, big, paths * (views // len(cameras)), truth, settings,
                                  _MEMORY_SCALE, 0))
@@ -158,8 +167,10 @@ def bench_carve(*, views=30, settings=CarvingSettings(), cells=256, memory=True)
         Views per scene.
     settings : CarvingSettings, optional
     cells : int, optional
-        Voxels along the longest side of the cable's box, which sets the voxel size with the
-        true radius (0: the settings' own size from the estimated radius).
+        Each scene is carved as a reconstruction carves it (the radius estimated from the
+        masks, the settings' own voxel size) and, in an *oracle* row beside it, with
+        ``cells`` voxels along the longest side of the cable's box and the true radius (0:
+        no oracle row).
     memory : bool, optional
         Add the 200-view 3840x2880 memory row (about a minute).
 

@@ -30,3 +30,17 @@ def test_every_crossing_is_one_junction_of_four_branches(spec):
     assert scores["junctions"] == scores["crossings"]
     assert scores["segments"] == scores["segments_expected"]
     assert scores["chain_mean_r"] < 0.5  # before any rod fitting
+
+
+def test_bench_carve_carves_as_a_user_and_labels_the_truth_fed_grid(tmp_path):
+    from engine.carving_benchmark import _scene_rows
+
+    spec = SceneSpec(crossings=2, seed=3, views=12, width=640, height=480)
+    ours, oracle = _scene_rows([("table 2", spec)], CarvingSettings(), tmp_path, 128)
+    assert ours["grid_from"] == "ours" and oracle["grid_from"].startswith("oracle: true radius")
+    # ours sizes its voxels from the radius it estimated: the settings' voxels per radius
+    assert ours["voxels_across"] == pytest.approx(2 * CarvingSettings().voxels_per_radius)
+    assert oracle["voxels_across"] != pytest.approx(ours["voxels_across"])
+    assert ours["crossings_found"] == ours["crossings"] == 2
+    assert [row["grid_from"] for row in _scene_rows([("t", spec)], CarvingSettings(),
+                                                    tmp_path, 0)] == ["ours"]
