@@ -343,7 +343,7 @@ def _with_shade(image_rgb, seed, objects, width, settings):
     rows, cols = np.nonzero(near & ~seed & ~objects)
     pixels = image_rgb[rows, cols]
     grow = (np.linalg.norm(_chroma(pixels) - inside, axis=-1) < settings.seed_shade_chroma) \
-        & (pixels.sum(axis=-1, dtype=np.int32) >= _CHROMA_FLOOR)
+        & (_brightness(pixels) >= _CHROMA_FLOOR)
     grown = seed.copy()
     grown[rows[grow], cols[grow]] = True
     return grown
