@@ -46,6 +46,9 @@ class VIEW3D_PT_cable_recon(_CablePanel, bpy.types.Panel):
         sub.active = settings.colour_mode == "HSV"
         sub.prop(settings, "hsv_low")
         sub.prop(settings, "hsv_high")
+        sub = column.column()
+        sub.active = settings.colour_mode == "AUTO"
+        sub.prop(settings.segmentation, "all_cables")
 
         column = layout.column()
         column.prop(settings, "camera_source")

@@ -35,7 +35,10 @@ QUALITY_GROUPS = tuple(
     for field in dataclasses.fields(PipelineSettings)
     if field.default_factory is not dataclasses.MISSING) + (("curve", "Curve", BezierSettings),)
 
-_GROUP_CLASSES = tuple(property_group_for(cls, f"CABLE_RECON_PG_{name}")
+# the preview follows the segmentation's settings as it follows the colour
+_GROUP_CLASSES = tuple(property_group_for(cls, f"CABLE_RECON_PG_{name}",
+                                          update=_update_preview if name == "segmentation"
+                                          else None)
                        for name, _, cls in QUALITY_GROUPS)
 
 _DEFAULT_COLOUR = ColourRange((170, 80, 40), (10, 255, 255))
@@ -52,8 +55,8 @@ class CABLE_RECON_PG_settings(bpy.types.PropertyGroup):
         description="Frame the colour is tuned on and the mask preview shows")
     colour_mode: EnumProperty(
         name="Colour", default="AUTO", update=_update_preview,
-        items=[("AUTO", "Automatic", "The frame's dominant saturated colour (or a colourless "
-                                     "cable darker or lighter than the table)"),
+        items=[("AUTO", "Automatic", "The most cable-like thing in the frames (a thin object of "
+                                     "one or a few colours standing out from its surroundings)"),
                ("HSV", "HSV range", "The range below (set it by hand, or pick the cable)")])
     hsv_low: IntVectorProperty(
         name="Low", size=3, min=0, max=255, default=_DEFAULT_COLOUR.low,

@@ -18,7 +18,7 @@ def _simple_fields(cls):
     return [f for f in dataclasses.fields(cls) if f.type in _KINDS]
 
 
-def property_group_for(cls, idname):
+def property_group_for(cls, idname, *, update=None):
     """A PropertyGroup class with one property per int/float/bool field of ``cls``.
 
     Names, defaults and tooltips come from the dataclass (its numpydoc ``Attributes``).
@@ -29,6 +29,8 @@ def property_group_for(cls, idname):
         A frozen settings dataclass of the engine.
     idname : str
         The class name (``CABLE_RECON_PG_...``).
+    update : callable, optional
+        Called as ``update(group, context)`` when any of its properties changes.
 
     Returns
     -------
@@ -41,6 +43,8 @@ def property_group_for(cls, idname):
         kind = _KINDS[field.type]
         label = field.name.replace("_", " ").capitalize()
         options = dict(name=label, description=texts.get(field.name, ""), default=field.default)
+        if update is not None:
+            options["update"] = update
         if kind is bool:
             annotations[field.name] = BoolProperty(**options)
         elif kind is int:

@@ -156,6 +156,22 @@ def _run_reconstruct(args):
              points, len(result.crossings), result.radius, result.units, output)
 
 
+def _family_options(args):
+    """``bench looks`` / ``pipeline-looks`` options of ``--families``: those families only,
+    without the captures and real photos."""
+    if args.families is None:
+        return {}
+    from .synthetic_looks import LOOK_FAMILIES
+
+    families = tuple(name.strip() for name in args.families.split(",") if name.strip())
+    unknown = [name for name in families if name not in LOOK_FAMILIES]
+    if unknown or not families:
+        raise InputError(f"unknown look famil{'ies' if len(unknown) > 1 else 'y'} "
+                         f"{', '.join(unknown) or '(none given)'}: choose from "
+                         f"{', '.join(LOOK_FAMILIES)}")
+    return {"families": families, "captures": None, "real": None}
+
+
 def _run_bench(args):
     from .benchmarks import bench_segment, format_table
 
@@ -165,7 +181,8 @@ def _run_bench(args):
         if args.stage == "segment":
             print(format_table(bench_segment(sample=args.sample, views=args.views)))
             print()
-        rows = bench_looks(seeds=args.seeds if args.stage == "looks" else 1)
+        rows = bench_looks(seeds=args.seeds if args.stage == "looks" else 1,
+                           **_family_options(args))
     elif args.stage == "cameras":
         from .camera_estimation import bench_cameras
 
@@ -198,7 +215,7 @@ def _run_bench(args):
         from .pipeline_benchmark import bench_pipeline_looks
 
         rows = bench_pipeline_looks(seeds=args.seeds, progress=None if args.quiet
-                                    else ProgressBar())
+                                    else ProgressBar(), **_family_options(args))
     else:
         from .pipeline_benchmark import bench_pipeline
 
@@ -279,6 +296,9 @@ def build_parser():
     bench.add_argument("--seeds", type=int, default=3,
                        help="scenes per look family and seed set (segment, looks, "
                             "pipeline-looks)")
+    bench.add_argument("--families", metavar="NAMES",
+                       help="comma-separated look families (looks, pipeline-looks): those "
+                            "only, without the Cycles captures and real photos")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")
     bench.set_defaults(run=_run_bench)

@@ -1,11 +1,15 @@
 """Ground truth of a synthetic scene: the true centreline, radius, crossings and cameras.
 
+A scene may hold several cables: their centrelines follow one another in ``centreline``, each
+new one starting at a sample listed in ``breaks`` (crossings index the whole array, so a
+crossing between two cables is one like any other).
+
 Stored as JSON (``"format": "cable_recon.ground_truth/1"``) beside a scene's images, in the
 same world units as its cameras.
 """
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +23,8 @@ __all__ = ["GROUND_TRUTH_FORMAT", "TrueCrossing", "GroundTruth", "read_ground_tr
            "write_ground_truth"]
 
 GROUND_TRUTH_FORMAT = "cable_recon.ground_truth/1"
+#: Radii of arc length :attr:`GroundTruth.arc_length` puts between two cables.
+_BREAK_ARC = 1000.0
 
 
 @dataclass(frozen=True)
@@ -57,6 +63,8 @@ class GroundTruth:
         Which generator made it (``"table"``, ``"knot"``, ``"hanging"``, ...).
     up : ndarray, shape (3,)
         The world's up direction (the table normal); "over" means higher along it.
+    breaks : tuple of int
+        Samples where another cable starts (empty: one cable). Several cables are open.
     """
 
     centreline: np.ndarray
@@ -66,6 +74,7 @@ class GroundTruth:
     cameras: tuple = ()
     kind: str = "table"
     up: np.ndarray = (0.0, 0.0, 1.0)
+    breaks: tuple = ()
 
     def __post_init__(self):
         centreline = np.array(self.centreline, dtype=np.float64)
@@ -83,18 +92,44 @@ class GroundTruth:
         for crossing in self.crossings:
             if not (0 <= crossing.over < len(centreline) and 0 <= crossing.under < len(centreline)):
                 raise ValueError("crossing indices must point into the centreline")
+        breaks = tuple(int(b) for b in self.breaks)
+        bounds = (0,) + breaks + (len(centreline),)
+        if any(b - a < 2 for a, b in zip(bounds, bounds[1:])):
+            raise ValueError("breaks must increase and leave each cable two samples or more")
+        if breaks and self.closed:
+            raise ValueError("several cables are open (closed must be False with breaks)")
+        object.__setattr__(self, "breaks", breaks)
+
+    @property
+    def cables(self):
+        """Each cable's samples as a ``slice`` of ``centreline``, in order."""
+        bounds = (0,) + self.breaks + (len(self.centreline),)
+        return tuple(slice(a, b) for a, b in zip(bounds, bounds[1:]))
+
+    @property
+    def lines(self):
+        """Each cable as ``(points, closed)``."""
+        return tuple((self.centreline[cable], self.closed) for cable in self.cables)
+
+    def cable_of(self, index):
+        """Which cable holds centreline sample ``index``."""
+        return int(np.searchsorted(self.breaks, index, side="right"))
 
     @property
     def arc_length(self):
-        """Cumulative arc length at each centreline sample, starting at 0."""
+        """Cumulative arc length at each centreline sample, starting at 0; a cable after a
+        break starts ``_BREAK_ARC`` radii further on (arc windows never span two cables)."""
         steps = np.linalg.norm(np.diff(self.centreline, axis=0), axis=1)
+        for start in self.breaks:
+            steps[start - 1] = _BREAK_ARC * self.radius
         return np.concatenate([[0.0], np.cumsum(steps)])
 
     @property
     def length(self):
-        """Total length of the cable (a loop includes its closing edge)."""
+        """Total length of the cables (a loop includes its closing edge)."""
         closing = np.linalg.norm(self.centreline[-1] - self.centreline[0]) if self.closed else 0.0
-        return float(self.arc_length[-1] + closing)
+        return float(self.arc_length[-1] - len(self.breaks) * _BREAK_ARC * self.radius
+                     + closing)
 
     def crossing_position(self, crossing):
         """Midpoint of the two strands at ``crossing``."""
@@ -129,15 +164,20 @@ class GroundTruth:
 
     def with_cameras(self, cameras):
         """A copy with ``cameras`` as the scene's views."""
-        return GroundTruth(self.centreline, self.radius, self.crossings, self.closed,
-                           tuple(cameras), self.kind, self.up)
+        return replace(self, cameras=tuple(cameras))
+
+    def strand_ref(self, index):
+        """Sample ``index`` as a :class:`.result.StrandRef` (one path per cable)."""
+        cable = self.cable_of(index)
+        return StrandRef(cable, index - self.cables[cable].start)
 
     def as_result(self, units="m"):
         """The truth as a perfect reconstruction result (crossings with confidence 1)."""
-        crossings = tuple(Crossing(self.crossing_position(c), StrandRef(0, c.over),
-                                   StrandRef(0, c.under), 1.0) for c in self.crossings)
-        return Result(radius=self.radius, paths=(CablePath(self.centreline, closed=self.closed),),
-                      crossings=crossings, cameras=self.cameras, units=units)
+        crossings = tuple(Crossing(self.crossing_position(c), self.strand_ref(c.over),
+                                   self.strand_ref(c.under), 1.0) for c in self.crossings)
+        paths = tuple(CablePath(points, closed=closed) for points, closed in self.lines)
+        return Result(radius=self.radius, paths=paths, crossings=crossings,
+                      cameras=self.cameras, units=units)
 
     def to_dict(self):
         """JSON-ready dict in ``cable_recon.ground_truth/1``."""
@@ -151,6 +191,7 @@ class GroundTruth:
             "crossings": [{"over": c.over, "under": c.under, "angle": c.angle}
                           for c in self.crossings],
             "cameras": [camera.to_dict() for camera in self.cameras],
+            **({"breaks": list(self.breaks)} if self.breaks else {}),
         }
 
     @classmethod
@@ -165,7 +206,8 @@ class GroundTruth:
             return cls(centreline=np.asarray(data["centreline"], dtype=np.float64),
                        radius=float(data["radius"]), crossings=crossings,
                        closed=bool(data.get("closed", False)), cameras=cameras,
-                       kind=str(data.get("kind", "table")), up=data.get("up", (0, 0, 1)))
+                       kind=str(data.get("kind", "table")), up=data.get("up", (0, 0, 1)),
+                       breaks=tuple(int(b) for b in data.get("breaks", ())))
         except (KeyError, TypeError, ValueError) as error:
             raise InputError(f"malformed ground truth: {error}") from None
 

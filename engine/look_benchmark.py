@@ -8,10 +8,13 @@ whichever side is smaller). Rows: each look family on its tuning seeds and on it
 seeds (:data:`.synthetic_looks.TUNING_SEEDS`, :data:`.synthetic_looks.HELD_OUT_SEEDS`; code is
 tuned on the first only), the pre-rendered Cycles captures in ``samples/looks`` (held out) and
 real photos with labels (``../shared/real/mbest-s1``, when present; they were looked at while
-tuning, so they are not held out). Frames are segmented on one core.
+tuning, so they are not held out). Frames are segmented on one core. A family of several
+cables (:data:`.synthetic_looks.SEVERAL_CABLES`) is segmented as a user asking for all of them
+would (``all_cables``), and scored against the masks of every cable.
 """
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -19,7 +22,7 @@ import numpy as np
 
 from .image_sequence import read_image
 from .segmentation import SegmentationSettings, reference_frames, segment_frame, sequence_colour
-from .synthetic_looks import HELD_OUT_SEEDS, LOOK_FAMILIES, TUNING_SEEDS
+from .synthetic_looks import HELD_OUT_SEEDS, LOOK_FAMILIES, SEVERAL_CABLES, TUNING_SEEDS
 from .synthetic_scene import look_scene
 
 __all__ = ["bench_looks", "naive_mask", "score_sequence"]
@@ -97,9 +100,9 @@ def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samp
     views, width, height : int, optional
         Of each synthetic scene.
     captures : path, optional
-        Folder of pre-rendered captures (``<look>/images``, ``<look>/masks``).
+        Folder of pre-rendered captures (``<look>/images``, ``<look>/masks``); None: none.
     real : path, optional
-        Real photos with labels (``images/``, ``labels/``); skipped when missing.
+        Real photos with labels (``images/``, ``labels/``); skipped when missing or None.
     settings : SegmentationSettings, optional
     families : sequence of str, optional
 
@@ -116,21 +119,23 @@ def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samp
                 scores = []
                 for seed in pool[:seeds]:
                     scene = look_scene(family, seed, views=views, width=width, height=height)
-                    scores.append(score_sequence(list(scene.images), list(scene.masks),
-                                                 settings))
+                    scores.append(score_sequence(
+                        list(scene.images), list(scene.masks),
+                        replace(settings, all_cables=True) if family in SEVERAL_CABLES
+                        else settings))
                 every[split] += scores
                 rows.append(_row(family, split, scores))
         for split, scores in every.items():
             rows.append(_row("all families", split, scores))
-        captures = Path(captures)
-        if captures.is_dir():
+        if captures is not None and Path(captures).is_dir():
+            captures = Path(captures)
             scores = [score_sequence(*_read_capture(folder, "masks"), settings)
                       for folder in sorted(captures.iterdir())
                       if (folder / "ground_truth.json").is_file()]
             if scores:
                 rows.append(_row("Cycles captures", "held-out", scores))
-        real = Path(real)
-        if (real / "labels").is_dir():
+        if real is not None and (Path(real) / "labels").is_dir():
+            real = Path(real)
             rows.append(_row(f"real photos ({real.name})", "used in tuning",
                              [score_sequence(*_read_capture(real, "labels"), settings)]))
     finally:

@@ -384,11 +384,16 @@ class _Polylines:
 
 
 class _TrueLine(_Polylines):
-    """The true centreline (one path) with arc-window projections for strand following."""
+    """The true cables with arc-window projections for strand following; arc positions are
+    those of :attr:`.ground_truth.GroundTruth.arc_length` (cables far apart)."""
 
     def __init__(self, truth, spacing):
-        super().__init__([(truth.centreline, truth.closed)], spacing)
-        self.length = self.lengths[0]
+        super().__init__(truth.lines, spacing)
+        arc = truth.arc_length
+        offsets = [np.full(len(points) - (0 if closed else 1), arc[cable.start])
+                   for (points, closed), cable in zip(truth.lines, truth.cables)]
+        self.seg_arc = self.seg_arc + np.concatenate(offsets)
+        self.length = float(self.seg_arc[-1] + self.seg_len[-1])
         self.is_closed = truth.closed
         self.seg_arc_twice = np.concatenate([self.seg_arc, self.seg_arc + self.length])
 
@@ -463,7 +468,7 @@ class Metrics:
     completeness : float
         Fraction of the true centreline's length within ``coverage`` (1 r) of the reconstruction.
     one_path : bool
-        Exactly one path and no wrong connection.
+        Exactly one path per true cable and no wrong connection.
     path_count : int
     wrong_connections : int
         Steps along a reconstructed path that jump along the true cable, plus the times a path
@@ -683,7 +688,7 @@ def evaluate(result, truth, *, align=False, settings=None):
     accuracy_max = float(accuracy.max())
 
     # Completeness: true samples to the reconstructed polylines.
-    coarse = _Polylines([(truth.centreline, truth.closed)], settings.sample_spacing * r)
+    coarse = _Polylines(truth.lines, settings.sample_spacing * r)
     gap, _, _ = recon.nearest(coarse.dense)
     covered = gap <= settings.coverage * r
     completeness = float(coarse.weights[covered].sum() / coarse.weights.sum()) \
@@ -703,7 +708,7 @@ def evaluate(result, truth, *, align=False, settings=None):
         accuracy_p95=accuracy_p95,
         accuracy_max=accuracy_max,
         completeness=completeness,
-        one_path=len(result.paths) == 1 and wrong == 0,
+        one_path=len(result.paths) == len(truth.cables) and wrong == 0,
         path_count=len(result.paths),
         wrong_connections=int(wrong),
         crossings_right=sum(check.right for check in details),

@@ -10,6 +10,7 @@ crossings right, one path, the radius error, the time of each stage and the peak
 
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from .benchmarks import DEFAULT_SAMPLE, in_fresh_process
@@ -43,8 +44,9 @@ def pipeline_suite(views=30):
     ]
 
 
-def scored_run(folder, truth_file, use_true_cameras, masks=None):
-    """In a fresh process: reconstruct one capture (with ``masks`` if given) and score it.
+def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None):
+    """In a fresh process: reconstruct one capture (with ``masks`` if given, and ``settings``,
+    a :class:`.pipeline.PipelineSettings`, if given) and score it.
 
     The process may use at most :data:`MEMORY_LIMIT` bytes: a run past it is a row with its
     error, not a machine out of memory.
@@ -61,7 +63,8 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None):
     try:
         state = run_reconstruction(folder / "images",
                                    cameras=folder / "sparse" if use_true_cameras else None,
-                                   masks=masks)
+                                   masks=masks, **({} if settings is None
+                                                   else {"settings": settings}))
     except (ReconstructionError, ValueError, MemoryError) as error:
         return {"error": str(error)[:80], "total_s": time.perf_counter() - started}
     except Exception as error:  # a bug: the row says so, the bench goes on
@@ -82,6 +85,18 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None):
     row.update({f"{stage}_s": result.timings.get(stage, 0.0) for stage in _STAGE_COLUMNS})
     row["total_s"] = total
     return row
+
+
+def _settings_for(family):
+    """The settings a user would run a look family with: all cables where there are several
+    (:data:`.synthetic_looks.SEVERAL_CABLES`), else the defaults (None)."""
+    from .pipeline import PipelineSettings
+    from .synthetic_looks import SEVERAL_CABLES
+
+    if family not in SEVERAL_CABLES:
+        return None
+    settings = PipelineSettings()
+    return replace(settings, segmentation=replace(settings.segmentation, all_cables=True))
 
 
 def _confident_right(metrics):
@@ -157,7 +172,7 @@ def _write_naive_masks(images, out):
 
 
 def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks",
-                         progress=None):
+                         families=None, progress=None):
     """End to end on every look family (tuning and held-out seeds) and the Cycles captures,
     with the true cameras: our masks (as a user's run makes them), the naive threshold's,
     and the exact masks (the oracle).
@@ -169,7 +184,9 @@ def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks
     views : int, optional
         Views per synthetic scene (960x720, 3 crossings).
     captures : path, optional
-        Pre-rendered Cycles captures (held out).
+        Pre-rendered Cycles captures (held out); None: none.
+    families : sequence of str, optional
+        Look families (all of :data:`.synthetic_looks.LOOK_FAMILIES` if None).
     progress : callable, optional
 
     Returns
@@ -179,11 +196,11 @@ def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks
     from .synthetic_looks import HELD_OUT_SEEDS, LOOK_FAMILIES, TUNING_SEEDS
     from .synthetic_scene import look_scene
 
-    jobs = [(family, split, seed) for family in LOOK_FAMILIES
+    jobs = [(family, split, seed) for family in (LOOK_FAMILIES if families is None else families)
             for split, pool in (("tuning", TUNING_SEEDS), ("held-out", HELD_OUT_SEEDS))
             for seed in pool[:seeds]]
-    captures = Path(captures)
-    if captures.is_dir():
+    if captures is not None and Path(captures).is_dir():
+        captures = Path(captures)
         jobs += [("Cycles " + folder.name.split("-")[0], "held-out", folder)
                  for folder in sorted(captures.iterdir())
                  if (folder / "ground_truth.json").is_file()]
@@ -204,7 +221,8 @@ def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks
                 row = {"looks": family, "set": split, "scene": label, "masks": masks_label}
                 row.update(in_fresh_process(scored_run, str(folder),
                                             str(folder / "ground_truth.json"), True,
-                                            None if masks is None else str(masks)))
+                                            None if masks is None else str(masks),
+                                            _settings_for(family)))
                 rows.append(row)
     if progress is not None:
         progress(1.0, "done")

@@ -16,8 +16,8 @@ from .mask_agreement import MaskAgreementSettings, agree_masks
 from .packed_mask import PackedMask
 from .pipeline import PipelineSettings, sequence_cameras
 from .progress import StageProgress, check_cancel
-from .segmentation import (SegmentationSettings, reference_frames, segment_frame,
-                           sequence_colour)
+from .segmentation import (SegmentationSettings, SeveralCables, reference_frames,
+                           segment_frame, sequence_colour)
 
 __all__ = ["segment_sequence_to_folder", "contact_sheet"]
 
@@ -116,7 +116,11 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         frames = reference_frames(len(sequence), reference_frame, settings.model_frames)
         found = colour is None
         colour, model = sequence_colour([sequence.read(k) for k in frames], colour, settings)
-        if found:
+        if found and isinstance(model, SeveralCables):
+            log.info("%d cables found on %s: --hsv %s", len(model.cables),
+                     sequence.names[reference_frame],
+                     " / ".join(str(cable) for cable, _ in model.cables))
+        elif found:
             log.info("cable colour found on %s: --hsv %s", sequence.names[reference_frame], colour)
         agree = agreement.rounds > 0
         # the segmentation's share of the progress bar (estimating cameras takes long)

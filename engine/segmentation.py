@@ -19,7 +19,7 @@ e.g. 170–8, is red), saturation and value 0–255.
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -43,10 +43,19 @@ _EDGE_SAMPLE = 7
 #: 15 s; at 4096 an 8K frame's search for the cable tried one size more, 20 s).
 _COLOUR_SIZE = 3840
 
-__all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "auto_colour",
-           "reference_frames", "sequence_colour", "learn_colour_model", "colour_seed",
-           "colour_at", "segment_frame", "cable_mask", "refine_edges", "cable_width", "junction_map",
-           "junction_centres"]
+#: :func:`_split_by_hue`: seed pixels of saturation and value at least ``_HUED`` have a hue;
+#: hues whose peaks lie at least ``_HUE_APART`` apart (OpenCV units, 2 degrees each) and hold
+#: ``_HUE_SHARE`` of those pixels each are different cables when each hue's pixels lie mostly
+#: (``_THIN_SHARE``) in thin pieces (a stripe's bands do not).
+_HUED = 50
+_HUE_APART = 25
+_HUE_SHARE = 0.15
+_THIN_SHARE = 0.5
+
+__all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "SeveralCables",
+           "auto_colour", "reference_frames", "sequence_colour", "learn_colour_model",
+           "colour_seed", "colour_at", "segment_frame", "cable_mask", "refine_edges", "cable_width",
+           "junction_map", "junction_centres"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +127,10 @@ class SegmentationSettings:
         miss (shading darkens a colour, it keeps its chromaticity). A cable whose
         chromaticity is within twice ``seed_shade_chroma`` of its surroundings' counts as
         colourless: neither this nor ``shade_chroma`` applies.
+    all_cables : bool
+        Find every cable of its own colour, not only the most cable-like thing (automatic
+        colour only): each cable is segmented with its own colour model and the masks are
+        their union, so each becomes a path.
     shadow_chroma, shadow_depth : float
         A pixel the colour range or model calls cable is the cable's shadow when it is of
         the local background's chromaticity (within ``shadow_chroma``), darker than it, and
@@ -153,6 +166,26 @@ class SegmentationSettings:
     seed_shade_chroma: float = 0.03
     shadow_chroma: float = 0.02
     shadow_depth: float = 1.5
+    all_cables: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class SeveralCables:
+    """Every cable found (``SegmentationSettings.all_cables``): what :func:`segment_frame`
+    takes as its ``model`` to segment each and join the masks.
+
+    Attributes
+    ----------
+    cables : tuple of (ColourRange, ColourModel or None)
+        Each cable's colour and colour model, the most cable-like first.
+    """
+
+    cables: tuple
+
+    def __post_init__(self):
+        if not self.cables:
+            raise ValueError("SeveralCables needs at least one cable")
+        object.__setattr__(self, "cables", tuple(self.cables))
 
 
 @dataclass(frozen=True, eq=False)
@@ -205,19 +238,107 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
     Returns
     -------
     colour : ColourRange
-    model : ColourModel or None
-        None when ``settings.model`` is off or the range has no thin piece in the frames.
+        The (first) cable's colour.
+    model : ColourModel, SeveralCables or None
+        None when ``settings.model`` is off or the range has no thin piece in the frames; with
+        ``settings.all_cables`` and no ``colour`` given, every cable found
+        (:class:`SeveralCables`, hues split by :func:`_split_by_hue`).
     """
     frames = [reduced(frame, _COLOUR_SIZE) for frame in frames]
     if colour is not None:
         return colour, learn_colour_model(frames, colour, settings) if settings.model else None
     colour, candidate = find_cable(frames)
-    seeds = [colour_seed(frame, candidate, settings) for frame in frames]
-    # the range around the seeds, which hold the shade side the candidate's clusters miss
+    if not settings.all_cables:
+        return _learnt(frames, [colour_seed(frame, candidate, settings) for frame in frames],
+                       colour, settings)
+    # split by hue first, then each cable's shade side is found with its own colour
+    bare = replace(settings, seed_shade_reach=0.0)
+    parts = _split_by_hue(frames, [colour_seed(frame, candidate, bare) for frame in frames])
+    if settings.seed_shade_reach > 0:
+        parts = [[(_with_shade(frame, seed, objects, width, settings) if seed.any() else seed,
+                   objects, width) for frame, (seed, objects, width) in zip(frames, part)]
+                 for part in parts]
+    cables = [_learnt(frames, part, colour, settings) for part in parts]
+    return cables[0][0], SeveralCables(cables)
+
+
+def _learnt(frames, seeds, colour, settings):
+    """``(colour, model)`` of one cable from its seeds in the frames: the range around the
+    seeds (which hold the shade side the candidate's clusters miss; ``colour`` if they are
+    empty) and the model learnt from them."""
     pixels = np.concatenate([hsv_image(frame)[seed] for frame, (seed, _, _) in zip(frames, seeds)])
     if len(pixels):
         colour = range_of(pixels, shade=1.0)
     return colour, _model_of(frames, seeds, settings) if settings.model else None
+
+
+def _split_by_hue(frames, seeds):
+    """A cable's seeds (:func:`colour_seed` per frame) split into one set per cable when they
+    hold cables of clearly different hues (two cables crossing are often found as one thin
+    object of two colours); ``[seeds]`` otherwise. Pixels without a hue (dark, grey) go with
+    the nearest pixel that has one."""
+    hsvs = [hsv_image(frame) for frame in frames]
+    hues = np.concatenate([hsv[seed][:, 0] for hsv, (seed, _, _) in zip(hsvs, seeds)
+                           if seed.any()] or [np.zeros(0, np.uint8)])
+    hued = np.concatenate([(hsv[seed][:, 1] >= _HUED) & (hsv[seed][:, 2] >= _HUED)
+                           for hsv, (seed, _, _) in zip(hsvs, seeds) if seed.any()]
+                          or [np.zeros(0, bool)])
+    peaks = _hue_peaks(hues[hued])
+    if len(peaks) < 2:
+        return [seeds]
+    parts = [[] for _ in peaks]
+    for hsv, (seed, objects, width) in zip(hsvs, seeds):
+        nearest = _nearest_peak(hsv, seed, peaks)
+        for number, part in enumerate(parts):
+            mask = nearest == number
+            part.append((mask, objects, cable_width(mask) if mask.any() else width))
+    for part in parts:  # a stripe's bands are short pieces, not a cable
+        area = sum(np.count_nonzero(mask) for mask, _, _ in part)
+        thin_area = sum(np.count_nonzero(thin[labels]) for labels, thin, _, _ in
+                        (thin_pieces(mask) for mask, _, _ in part))
+        if thin_area < _THIN_SHARE * max(area, 1):
+            return [seeds]
+    return parts
+
+
+def _hue_peaks(hues):
+    """Peaks of a circular hue histogram, each holding ``_HUE_SHARE`` of the pixels (within
+    half ``_HUE_APART`` of it) and ``_HUE_APART`` from a larger one."""
+    if len(hues) == 0:
+        return []
+    histogram = np.bincount(hues.astype(np.int64), minlength=180)[:180].astype(float)
+    reach = _HUE_APART // 2
+    window = np.ones(2 * reach + 1)
+    mass = np.convolve(np.concatenate([histogram[-reach:], histogram, histogram[:reach]]),
+                       window, mode="valid")
+    peaks = []
+    for hue in np.argsort(-mass, kind="stable"):
+        if mass[hue] < _HUE_SHARE * len(hues):
+            break
+        if all(min(abs(hue - p), 180 - abs(hue - p)) >= _HUE_APART for p in peaks):
+            peaks.append(int(hue))
+    return peaks
+
+
+def _nearest_peak(hsv, seed, peaks):
+    """Per pixel of ``seed``: the index of the hue peak nearest its hue (pixels without a hue:
+    that of the nearest seed pixel with one); -1 off the seed."""
+    nearest = np.full(seed.shape, -1, dtype=np.int64)
+    if not seed.any():
+        return nearest
+    hue = hsv[..., 0].astype(np.int64)
+    gaps = [np.minimum(np.abs(hue - p), 180 - np.abs(hue - p)) for p in peaks]
+    closest = np.argmin(np.stack(gaps), axis=0)
+    hued = seed & (hsv[..., 1] >= _HUED) & (hsv[..., 2] >= _HUED)
+    if not hued.any():
+        return nearest
+    _, labels = cv2.distanceTransformWithLabels((~hued).view(np.uint8), cv2.DIST_L2, 5,
+                                                labelType=cv2.DIST_LABEL_PIXEL)
+    rows, cols = np.nonzero(hued)
+    owner = np.zeros(labels.max() + 1, dtype=np.int64)
+    owner[labels[rows, cols]] = closest[rows, cols]
+    nearest[seed] = owner[labels[seed]]
+    return nearest
 
 
 def colour_at(image_rgb, x, y, *, radius=3):
@@ -581,6 +702,8 @@ def _cable_masks(image_rgb, colour, settings, model=None):
     (:func:`refine_edges`) and the mask before that, whose topology the junctions are read
     from (on the realistic sample, junctions from the refined outline put 12% of their pixels
     farther than 3 r from any crossing; from the colour range's mask, 3.5%)."""
+    if isinstance(model, SeveralCables):
+        return _several_masks(image_rgb, model, settings)
     hsv = hsv_image(image_rgb)
     if settings.model and model is None:
         model = learn_colour_model([image_rgb], colour, settings)
@@ -623,6 +746,24 @@ def _cable_masks(image_rgb, colour, settings, model=None):
     colour_range_mask[box] = plain
     mask[box] = refined
     return mask, colour_range_mask, cable_width(refined)
+
+
+def _several_masks(image_rgb, several, settings):
+    """:func:`_cable_masks` of every cable, joined; the width is the cables' mean, each
+    weighted by its area. Specks are removed from the joined masks: a stretch of cable seen
+    between two passes of another is a small piece of its own mask, not of the joined one."""
+    alone = replace(settings, speck_area=0.0)
+    found = [_cable_masks(image_rgb, colour, alone, model) for colour, model in several.cables]
+    mask = np.logical_or.reduce([m for m, _, _ in found])
+    colour_range_mask = np.logical_or.reduce([m for _, m, _ in found])
+    areas = np.array([np.count_nonzero(m) if w > 0 else 0 for m, _, w in found], dtype=float)
+    width = float(np.dot(areas, [w for _, _, w in found]) / areas.sum()) if areas.sum() else 0.0
+    if width > 0 and settings.speck_area > 0:
+        for joined in (mask, colour_range_mask):
+            half = cv2.resize(joined.view(np.uint8), (joined.shape[1] // 2, joined.shape[0] // 2),
+                              interpolation=cv2.INTER_AREA) > 0
+            joined &= _remove_specks(joined, half, settings.speck_area * width * width)
+    return mask, colour_range_mask, width
 
 
 def _channel_percentile(image, channel, mask, percent):
@@ -899,9 +1040,11 @@ def segment_frame(image_rgb, colour, settings=SegmentationSettings(), *, model=N
     image_rgb : ndarray, shape (H, W, 3), uint8
     colour : ColourRange
     settings : SegmentationSettings, optional
-    model : ColourModel, optional
+    model : ColourModel or SeveralCables, optional
         The sequence's colour model (:func:`learn_colour_model`); learnt from this frame
-        alone if None and ``settings.model``.
+        alone if None and ``settings.model``. Several cables (:func:`sequence_colour`): each
+        is segmented with its own colour and model, the masks joined, and the junctions read
+        from the joined mask (a cable crossing another is a junction).
 
     Returns
     -------

@@ -1,14 +1,15 @@
 """Seeded cable layouts with known topology: the ground truth of synthetic scenes.
 
 Layouts are built in units of the cable radius (r = 1) and scaled to metres at the end, so the
-same seed gives the same shape at every size. Three kinds:
+same seed gives the same shape at every size. Four kinds:
 
 * :func:`table_layout`: a cable lying on a table (z = 0 is the table, the cable's centre rests
   at z = r) with exactly N crossings, free ends or a closed loop, the upper strand lifted over
   the lower one;
 * :func:`knot_layout`: an overhand knot (three alternating crossings) with free tails;
 * :func:`hanging_layout`: a cable hanging in the air between two points, bent out of its
-  plane: a 3D shape that no single image captures.
+  plane: a 3D shape that no single image captures;
+* :func:`pair_layout`: two cables on a table crossing each other (and maybe themselves).
 
 Guarantees, checked on every layout before it is returned (else the next candidate is drawn):
 strands never closer than 2 r in 3D, and never closer than ``clearance`` in the table plane
@@ -26,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from .ground_truth import GroundTruth, TrueCrossing
 
-__all__ = ["LayoutSettings", "table_layout", "knot_layout", "hanging_layout",
+__all__ = ["LayoutSettings", "table_layout", "knot_layout", "hanging_layout", "pair_layout",
            "find_crossings_2d", "default_extent", "LayoutError"]
 
 SAMPLE_SPACING = 0.25  # r: centreline samples
@@ -414,6 +415,58 @@ def table_layout(crossings, *, seed=0, radius=0.004, extent=None, closed=False,
             return _finish(lifted, found, over_first, radius, closed, "table")
     raise LayoutError(f"no table layout with {crossings} crossings after {settings.max_tries} "
                       f"tries (seed {seed}, extent {extent} m, radius {radius} m)")
+
+
+def pair_layout(crossings=3, *, seed=0, radius=0.004, extent=None, gap=24.0,
+                settings=LayoutSettings()):
+    """Two cables lying on a table, crossing each other at least once.
+
+    A :func:`table_layout` with ``crossings`` crossings is cut in two near its middle: ``gap``
+    of cable is taken out where no crossing lies within ``min_crossing_spacing`` of the cut,
+    so that at least one crossing joins the two cables and the two new ends lie at least
+    ``gap / 2`` apart (two ends closer than that would read as one cable with a break).
+
+    Parameters
+    ----------
+    crossings : int, optional
+        Crossings of the uncut layout, 1 to 12 (each is a crossing of the pair).
+    seed : int, optional
+    radius, extent : float, optional
+        As :func:`table_layout`.
+    gap : float, optional
+        Cable taken out at the cut, r.
+    settings : LayoutSettings, optional
+
+    Returns
+    -------
+    GroundTruth
+        ``kind="pair"``, one break.
+    """
+    if not 1 <= crossings <= 12:
+        raise ValueError("crossings must be between 1 and 12")
+    rng = np.random.default_rng([seed, crossings, 29])
+    half = int(round(0.5 * gap / SAMPLE_SPACING))
+    keep_off = half + int(math.ceil(settings.min_crossing_spacing / SAMPLE_SPACING))
+    for _ in range(50):
+        truth = table_layout(crossings, seed=int(rng.integers(2 ** 31)), radius=radius,
+                             extent=extent, settings=settings)
+        count = len(truth.centreline)
+        passes = np.array([[c.over, c.under] for c in truth.crossings])
+        for cut in rng.permutation(np.arange(int(0.3 * count), int(0.7 * count))):
+            if np.abs(passes - cut).min() < keep_off:
+                continue
+            if not np.any((passes < cut).sum(axis=1) == 1):  # no crossing joins the two
+                continue
+            ends = truth.centreline[[cut - half - 1, cut + half + 1], :2] / radius
+            if np.linalg.norm(ends[0] - ends[1]) < 0.5 * gap:
+                continue
+            keep = np.r_[0:cut - half, cut + half + 1:count]
+            shift = lambda i: int(i) if i < cut else int(i) - (2 * half + 1)  # noqa: E731
+            found = tuple(TrueCrossing(shift(c.over), shift(c.under), c.angle)
+                          for c in truth.crossings)
+            return GroundTruth(truth.centreline[keep], radius, found, kind="pair",
+                               breaks=(cut - half,))
+    raise LayoutError(f"no pair layout with {crossings} crossings (seed {seed})")
 
 
 def _tail(rng, start, direction, length, turn):

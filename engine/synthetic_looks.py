@@ -18,6 +18,7 @@ Families (:data:`LOOK_FAMILIES`):
 ``air``         the cable held in the air over its own sharp cast shadow
 ``clutter``     objects of other colours on the table: one darker than the cable, one close
                 to its hue
+``two_cables``  two cables of different colours crossing each other (a ``"pair"`` layout)
 
 Every look also draws camera effects: sensor noise, JPEG quality, slight blur, exposure and
 vignetting.
@@ -29,11 +30,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["Look", "ClutterObject", "LOOK_FAMILIES", "TABLE_KINDS", "TUNING_SEEDS",
-           "HELD_OUT_SEEDS", "sample_look", "DEFAULT_LOOK", "with_camera_effects_off"]
+__all__ = ["Look", "ClutterObject", "LOOK_FAMILIES", "SEVERAL_CABLES", "TABLE_KINDS",
+           "TUNING_SEEDS", "HELD_OUT_SEEDS", "sample_look", "DEFAULT_LOOK",
+           "with_camera_effects_off"]
 
 LOOK_FAMILIES = ("saturated", "pale", "neutral", "patterned", "same_hue", "hard_light", "air",
-                 "clutter")
+                 "clutter", "two_cables")
+#: Families whose scenes hold several cables (drawn with the ``"pair"`` layout).
+SEVERAL_CABLES = ("two_cables",)
 TABLE_KINDS = ("wood", "voronoi", "weave", "paper", "tiles", "plain")
 
 #: Seeds the segmentation may be tuned on, and seeds it is only ever reported on.
@@ -82,6 +86,8 @@ class Look:
         cross-section, split along its length) or striped bands across the cable.
     stripe_period : float
         Length of one band plus one gap along the cable, r (0: two-tone).
+    other_cable_colour : tuple of int or None
+        The colour of every cable after the first in a scene of several; None: ``cable_colour``.
     gloss : float
         0 matt to 1 glossy: the strength and tightness of the specular highlight.
     table : str
@@ -123,6 +129,7 @@ class Look:
     cable_colour: tuple = (205, 45, 35)
     stripe_colour: tuple = None
     stripe_period: float = 0.0
+    other_cable_colour: tuple = None
     gloss: float = 0.6
     table: str = "wood"
     table_colour: tuple = (150, 128, 104)
@@ -296,6 +303,10 @@ def sample_look(family, seed):
     elif family == "clutter":
         look.update(cable_colour=cable, **_table(rng, avoid_hue=hue),
                     clutter=_clutter(rng, hue, value))
+    elif family == "two_cables":
+        other = _rgb(hue + float(rng.uniform(0.2, 0.8)), float(rng.uniform(0.5, 1.0)),
+                     float(rng.uniform(0.5, 0.95)))
+        look.update(cable_colour=cable, other_cable_colour=other, **_table(rng, avoid_hue=hue))
     return Look(**look)
 
 

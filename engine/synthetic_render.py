@@ -39,6 +39,7 @@ log = logging.getLogger(__name__)
 #: The table is a square this many times the cable's horizontal extent.
 TABLE_EXTENT_FACTOR = 4.0
 SPHERE_SPACING = 0.25  # r: spacing of the spheres that sweep the tube
+_CABLE_ARC = 1000.0  # r: arc length the sweep puts between two cables
 CLUTTER_CLEARANCE = 4.0  # r: least gap between a clutter object and the cable's footprint
 BACKGROUND = (60, 60, 64)  # beyond the table's edge
 
@@ -206,8 +207,8 @@ def render_masks(truth, cameras, look=None):
     ------
     ndarray, shape (H, W), bool
     """
-    spheres, _, tangents = _sweep(truth)
-    caps = _end_caps(spheres, tangents, truth.closed)
+    spheres, _, tangents, owner = _sweep(truth)
+    caps = _end_caps(spheres, tangents, owner, truth.closed)
     clutter = place_clutter(truth, look) if look is not None else ()
     for camera in cameras:
         pixel, depth = _ray_cast(camera, spheres, truth.radius, caps)[:2]
@@ -270,7 +271,6 @@ class _ShadowMap:
         du, dv = np.meshgrid(np.arange(-reach[0], reach[0] + 1),
                              np.arange(-reach[1], reach[1] + 1))
         du, dv = du.ravel(), dv.ravel()
-        near_end = int(np.ceil(1.0 / SPHERE_SPACING)) + 1
         for start in range(0, len(spheres), 512):
             index = np.arange(start, min(start + 512, len(spheres)))
             cell_u = np.round((uv[index, 0] - self.origin[0]) / self.cell[0]).astype(int)
@@ -282,8 +282,8 @@ class _ShadowMap:
             d2 = pu * pu + pv * pv
             inside = d2 < radius * radius
             surface = depth[index, None] + np.sqrt(np.maximum(radius * radius - d2, 0.0))
-            for end_sphere, end, outward in caps:  # nothing of the sweep beyond a flat end
-                close = np.abs(index - end_sphere) <= near_end
+            for _, end, outward, first, last in caps:  # nothing of the sweep beyond an end
+                close = (index >= first) & (index <= last)
                 if not close.any():
                     continue
                 point = (spheres[index, None, :] + pu[..., None] * self.basis[0]
@@ -474,26 +474,45 @@ def _strand_occlusion(truth, spheres, sphere_arc):
 
 
 def _sweep(truth):
-    """Sphere centres along the centreline, spaced ``SPHERE_SPACING`` r; arc length; tangent."""
-    points = truth.centreline
-    if truth.closed:
-        points = np.vstack([points, points[:1]])
-    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
-    samples = np.arange(0.0, arc[-1] + 1e-12, SPHERE_SPACING * truth.radius)
-    if not truth.closed and samples[-1] < arc[-1]:
-        samples = np.append(samples, arc[-1])
-    spheres = np.column_stack([np.interp(samples, arc, points[:, k]) for k in range(3)])
-    tangents = np.gradient(spheres, axis=0)
-    tangents /= np.maximum(np.linalg.norm(tangents, axis=1, keepdims=True), 1e-30)
-    return spheres, samples, tangents
+    """Sphere centres along each cable, spaced ``SPHERE_SPACING`` r; arc length (each further
+    cable ``_CABLE_ARC`` r on, so no arc window spans two); tangent; which cable."""
+    spheres, arcs, tangents, owners = [], [], [], []
+    offset = 0.0
+    for number, (points, closed) in enumerate(truth.lines):
+        if closed:
+            points = np.vstack([points, points[:1]])
+        steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+        arc = np.concatenate([[0.0], np.cumsum(steps)])
+        samples = np.arange(0.0, arc[-1] + 1e-12, SPHERE_SPACING * truth.radius)
+        if not closed and samples[-1] < arc[-1]:
+            samples = np.append(samples, arc[-1])
+        centres = np.column_stack([np.interp(samples, arc, points[:, k]) for k in range(3)])
+        tangent = np.gradient(centres, axis=0)
+        tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-30)
+        spheres.append(centres)
+        arcs.append(samples + offset)
+        tangents.append(tangent)
+        owners.append(np.full(len(samples), number))
+        offset += arc[-1] + _CABLE_ARC * truth.radius
+    return (np.vstack(spheres), np.concatenate(arcs), np.vstack(tangents),
+            np.concatenate(owners))
 
 
-def _end_caps(spheres, tangents, closed):
-    """Flat ends of an open cable, as Blender's filled bevel caps: (sphere, centre, outward)."""
+def _end_caps(spheres, tangents, owner, closed):
+    """Flat ends of open cables, as Blender's filled bevel caps: per end ``(sphere, centre,
+    outward, first, last)``, ``first..last`` the spheres of its cable near enough to reach
+    past it."""
     if closed:
         return ()
-    return ((0, spheres[0], -tangents[0]), (len(spheres) - 1, spheres[-1], tangents[-1]))
+    near_end = int(np.ceil(1.0 / SPHERE_SPACING)) + 1
+    caps = []
+    for number in range(int(owner[-1]) + 1):
+        members = np.flatnonzero(owner == number)
+        start, stop = int(members[0]), int(members[-1])
+        caps.append((start, spheres[start], -tangents[start], start,
+                     min(start + near_end, stop)))
+        caps.append((stop, spheres[stop], tangents[stop], max(stop - near_end, start), stop))
+    return tuple(caps)
 
 
 def _ray_cast(camera, spheres, radius, caps=()):
@@ -501,9 +520,10 @@ def _ray_cast(camera, spheres, radius, caps=()):
 
     Parameters
     ----------
-    caps : sequence of (int, ndarray, ndarray)
-        Per free end: its sphere index, centre and outward tangent (:func:`_end_caps`). The
-        sweep is cut by the plane through the end and the end disc is added.
+    caps : sequence of (int, ndarray, ndarray, int, int)
+        Per free end: its sphere index, centre, outward tangent and the spheres it cuts
+        (:func:`_end_caps`). Those are cut by the plane through the end and the end disc is
+        added.
 
     Returns
     -------
@@ -550,16 +570,15 @@ def _ray_cast(camera, spheres, radius, caps=()):
         hit = disc >= 0
         t = (b[hit] - np.sqrt(disc[hit])) / a[hit]
         keep = np.ones(len(t), dtype=bool)
-        near_end = int(np.ceil(1.0 / SPHERE_SPACING)) + 1  # spheres reaching past the end
-        for end_sphere, end, outward in caps:  # nothing of the sweep lies beyond a flat end
+        for _, end, outward, first, last in caps:  # nothing of the sweep beyond a flat end
             end_camera = camera.R @ end + camera.t
             beyond = (ray[hit] * t[:, None] - end_camera) @ (camera.R @ outward) > 0
-            keep &= ~(beyond & (np.abs(which[hit] - end_sphere) <= near_end))
+            keep &= ~(beyond & (which[hit] >= first) & (which[hit] <= last))
         hits_pixel.append((py[hit] * width + px[hit])[keep])
         hits_depth.append(t[keep])
         hits_sphere.append(which[hit][keep])
         hits_cap.append(np.zeros(int(keep.sum()), dtype=bool))
-    for end_sphere, end, outward in caps:  # the end discs themselves
+    for end_sphere, end, outward, _, _ in caps:  # the end discs themselves
         centre, normal = camera.R @ end + camera.t, camera.R @ outward
         if not visible[end_sphere]:
             continue
@@ -630,11 +649,11 @@ def _lit_table(truth, texture, look, centre, side, clutter, shadow_map, field):
     direct = (1.0 - look.ambient) * max(light[2], 0.0)
     full = look.ambient + direct  # the table in full white light shows its texture as it is
     if look.light == "soft":
-        shifted = truth.centreline[:, :2] - truth.centreline[:, 2:3] * light[:2] / light[2]
         shadow = np.zeros((size, size), dtype=np.uint8)
-        points = np.round(texture_points(shifted)).astype(np.int32)
-        cv2.polylines(shadow, [points], bool(truth.closed), 255,
-                      max(1, int(round(2 * radius_px))), cv2.LINE_AA)
+        for points, closed in truth.lines:  # each cable's soft shadow
+            shifted = points[:, :2] - points[:, 2:3] * light[:2] / light[2]
+            cv2.polylines(shadow, [np.round(texture_points(shifted)).astype(np.int32)],
+                          bool(closed), 255, max(1, int(round(2 * radius_px))), cv2.LINE_AA)
         shadow = gaussian_filter(shadow.astype(np.float32) / 255.0,
                                  sigma=max(radius_px * 0.6, 1.0))
         for thing in clutter:  # blurred in a window around the object
@@ -692,8 +711,8 @@ def _prepare(truth, look, texture):
     """What every view shares: the lit table, the sweep, the clutter, the shadow map."""
     centre, side = _table_geometry(truth)
     clutter = place_clutter(truth, look)
-    spheres, sphere_arc, tangents = _sweep(truth)
-    caps = _end_caps(spheres, tangents, truth.closed)
+    spheres, sphere_arc, tangents, owner = _sweep(truth)
+    caps = _end_caps(spheres, tangents, owner, truth.closed)
     light = look.light_direction
     shadow_map = _ShadowMap(spheres, truth.radius, light, caps) if look.light == "hard" \
         else None
@@ -708,7 +727,7 @@ def _prepare(truth, look, texture):
     return dict(look=look, truth=truth, lit_table=lit_table, to_world=to_world,
                 to_texture=np.linalg.inv(to_world), texture_size=texture.shape[0],
                 field=field, gain=gain, clutter=clutter, spheres=spheres, sphere_arc=sphere_arc,
-                tangents=tangents, caps=caps, shadow_map=shadow_map, light=light,
+                tangents=tangents, owner=owner, caps=caps, shadow_map=shadow_map, light=light,
                 occlusion=_strand_occlusion(truth, spheres, sphere_arc),
                 frame=_rotation_minimising_frame(tangents)
                 if look.stripe_colour is not None and look.stripe_period <= 0 else None)
@@ -732,10 +751,14 @@ def _direct_visibility(prepared, points, normals, skip=None):
 
 
 def _cable_colours(prepared, sphere, hit, normal, on_cap):
-    """Per hit: the cable's colour there (two-tone halves or stripes), RGB 0..1."""
+    """Per hit: the cable's colour there (two-tone halves or stripes; the other cables'
+    colour), RGB 0..1."""
     look = prepared["look"]
     base = np.asarray(look.cable_colour, dtype=np.float64) / 255.0
     colours = np.broadcast_to(base, (len(sphere), 3))
+    if look.other_cable_colour is not None:
+        other = np.asarray(look.other_cable_colour, dtype=np.float64) / 255.0
+        colours = np.where((prepared["owner"][sphere] > 0)[:, None], other[None, :], colours)
     if look.stripe_colour is None:
         return colours
     second = np.asarray(look.stripe_colour, dtype=np.float64) / 255.0
@@ -797,7 +820,7 @@ def _render_view(prepared, camera):
     along = np.einsum("ij,ij->i", normal, tangents[sphere])
     normal -= along[:, None] * tangents[sphere]
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-    for index, _, outward in caps:  # flat ends face along the cable
+    for index, _, outward, _, _ in caps:  # flat ends face along the cable
         normal[on_cap & (sphere == index)] = outward
     view = camera.center - hit
     view /= np.linalg.norm(view, axis=1, keepdims=True)

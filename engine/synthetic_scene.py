@@ -21,10 +21,10 @@ import cv2
 import numpy as np
 
 from .colmap_model import write_colmap_model
-from .ground_truth import GroundTruth, write_ground_truth
+from .ground_truth import write_ground_truth
 from .synthetic_cameras import cable_pixel_width, handheld_cameras, orbit_cameras
-from .synthetic_layouts import hanging_layout, knot_layout, table_layout
-from .synthetic_looks import DEFAULT_LOOK, ClutterObject, Look, sample_look
+from .synthetic_layouts import hanging_layout, knot_layout, pair_layout, table_layout
+from .synthetic_looks import DEFAULT_LOOK, SEVERAL_CABLES, ClutterObject, Look, sample_look
 from .synthetic_render import render_views
 
 __all__ = ["SceneSpec", "SyntheticScene", "make_scene", "write_scene", "look_spec", "look_scene",
@@ -41,7 +41,8 @@ class SceneSpec:
     Attributes
     ----------
     kind : str
-        ``"table"``, ``"loop"`` (a closed cable on the table), ``"knot"`` or ``"hanging"``.
+        ``"table"``, ``"loop"`` (a closed cable on the table), ``"knot"``, ``"hanging"`` or
+        ``"pair"`` (two cables crossing each other).
     crossings : int
         For ``"table"`` and ``"loop"``.
     seed : int
@@ -97,6 +98,8 @@ class SceneSpec:
             return knot_layout(**common)
         if self.kind == "hanging":
             return hanging_layout(**common)
+        if self.kind == "pair":
+            return pair_layout(self.crossings, **common)
         raise ValueError(f"unknown scene kind {self.kind!r}")
 
 
@@ -125,8 +128,7 @@ def lift_truth(truth, lift):
     if not lift:
         return truth
     centreline = truth.centreline + np.array([0.0, 0.0, lift * truth.radius])
-    return GroundTruth(centreline, truth.radius, truth.crossings, truth.closed, truth.cameras,
-                       truth.kind, truth.up)
+    return dataclasses.replace(truth, centreline=centreline)
 
 
 def make_scene(spec, *, texture=None):
@@ -174,7 +176,7 @@ def _framed_truth(spec):
     return truth.with_cameras(cameras)
 
 
-def look_spec(family, seed, *, kind="table", crossings=3, views=24, width=640, height=480,
+def look_spec(family, seed, *, kind=None, crossings=3, views=24, width=640, height=480,
               **fields):
     """The scene "look ``family``, seed ``seed``": its look and its layout drawn from the seed.
 
@@ -185,7 +187,8 @@ def look_spec(family, seed, *, kind="table", crossings=3, views=24, width=640, h
     seed : int
         Seeds the look (:func:`.synthetic_looks.sample_look`) and the layout.
     kind, crossings, views, width, height
-        As :class:`SceneSpec`.
+        As :class:`SceneSpec`; ``kind`` None: ``"pair"`` for a family of several cables
+        (:data:`.synthetic_looks.SEVERAL_CABLES`), else ``"table"``.
     **fields
         Further :class:`SceneSpec` fields (``radius``, ``rig``, ``image_format``, ...).
 
@@ -194,11 +197,13 @@ def look_spec(family, seed, *, kind="table", crossings=3, views=24, width=640, h
     SceneSpec
     """
     look = DEFAULT_LOOK if family == "default" else sample_look(family, seed)
+    if kind is None:
+        kind = "pair" if family in SEVERAL_CABLES else "table"
     return SceneSpec(kind=kind, crossings=crossings, seed=seed, views=views, width=width,
                      height=height, look=look, **fields)
 
 
-def look_scene(family, seed, *, kind="table", crossings=3, views=24, width=640, height=480,
+def look_scene(family, seed, *, kind=None, crossings=3, views=24, width=640, height=480,
                **fields):
     """Build and render the scene of :func:`look_spec` in one call.
 

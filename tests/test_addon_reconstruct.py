@@ -10,7 +10,7 @@ from mathutils.geometry import interpolate_bezier
 from engine.bezier import BezierSettings, distance_to_polyline
 from engine.mask_preview import mask_preview
 from engine.pipeline import PipelineSettings, reconstruct
-from engine.segmentation import auto_colour, segment_frame
+from engine.segmentation import SegmentationSettings, auto_colour, segment_frame
 from engine.synthetic_scene import SceneSpec, make_scene, write_scene
 
 
@@ -91,6 +91,14 @@ def test_live_preview_is_the_engines_mask_and_follows_the_colour(empty_scene, ca
     dim = np.array(image.pixels[:], dtype=np.float32).reshape(expected.shape)
     assert dim[..., :3].sum() < bright
     assert "no cable" in bpy.context.window_manager.cable_recon_status
+    # the preview follows the segmentation's quality settings (the colour panel's "All
+    # cables" among them) as it follows the colour
+    settings.colour_mode = "AUTO"
+    settings.segmentation.speck_area = 10000.0  # every piece is a speck
+    strict = np.array(image.pixels[:], dtype=np.float32).reshape(expected.shape)
+    wanted = mask_preview(frame_rgb, None, SegmentationSettings(speck_area=10000.0)).pixels
+    assert np.abs(strict - wanted).max() < 2 / 255
+    assert (np.abs(strict - shown).max(axis=-1) > 0.1).sum() > 50  # it changed
 
 
 def test_picking_the_cable_sets_a_colour_that_finds_it(empty_scene, capture):

@@ -92,3 +92,9 @@ def test_a_full_disk_leaves_nothing_behind(tmp_path, monkeypatch):
         write_image(tmp_path / "m.png", np.zeros((4, 4), np.uint8))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.json"]  # no temporary left
     assert (tmp_path / "kept.json").read_text() == "the user's"
+
+
+def test_bench_families_are_checked_before_the_work():
+    done = run_engine("bench", "looks", "--families", "saturated,tartan")
+    assert done.returncode == 2
+    assert "unknown look family tartan" in done.stderr and "two_cables" in done.stderr

@@ -73,7 +73,7 @@ def lifted(truth, look):
         return truth
     centreline = truth.centreline + np.array([0.0, 0.0, look.lift * truth.radius])
     return GroundTruth(centreline, truth.radius, truth.crossings, truth.closed, truth.cameras,
-                       truth.kind, truth.up)
+                       truth.kind, truth.up, truth.breaks)
 
 
 # --- clutter ------------------------------------------------------------------------------------
