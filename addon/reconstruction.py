@@ -23,7 +23,8 @@ from ..engine.progress import StageProgress
 from ..engine.segmentation import ColourRange
 from .mask_preview import frame_paths
 from .properties import colour_range, pipeline_settings
-from .scene_objects import build_bezier_curve, build_cameras, cable_material, remove_collection
+from .scene_objects import (add_cable_materials, build_bezier_curve, build_cameras,
+                            remove_collection)
 from .settings_properties import settings_from_group
 
 __all__ = ["RunRequest", "Outcome", "request_from_scene", "reconstruct_work", "flip_work",
@@ -223,7 +224,7 @@ def apply_outcome(context, request, outcome):
     collection = bpy.data.collections.new(request.name)
     try:
         obj = build_bezier_curve(result, outcome.curves, request.name, collection)
-        obj.data.materials.append(cable_material(f"{request.name} cable", result.colour))
+        add_cable_materials(obj, result, request.name)
         _remember(obj, request, outcome)
         if request.with_cameras and result.cameras:
             cameras = bpy.data.collections.new(f"{request.name} cameras")

@@ -8,6 +8,7 @@ import numpy as np
 from mathutils import Matrix
 
 __all__ = ["build_cable_curve", "build_bezier_curve", "build_cameras", "cable_material",
+           "add_cable_materials",
            "remove_collection", "OPENCV_TO_BLENDER_CAMERA"]
 
 #: Flips an OpenCV camera (looking along +z, y down) into Blender's (looking along -z, y up).
@@ -109,6 +110,20 @@ def cable_material(name, colour):
             node.inputs["Base Color"].default_value = (*linear, 1.0)
             node.inputs["Roughness"].default_value = 0.45
     return material
+
+
+def add_cable_materials(obj, result, name):
+    """Give a curve of ``result`` (one spline per path, in order) its cable materials: one
+    per path in that path's colour when the paths have colours (several cables), else one in
+    the cable's colour."""
+    colours = [path.colour for path in result.paths]
+    if len(colours) < 2 or all(colour is None for colour in colours):
+        obj.data.materials.append(cable_material(f"{name} cable", result.colour))
+        return
+    for number, (spline, colour) in enumerate(zip(obj.data.splines, colours)):
+        obj.data.materials.append(cable_material(
+            f"{name} cable {number + 1}", colour if colour is not None else result.colour))
+        spline.material_index = number
 
 
 def remove_collection(collection):

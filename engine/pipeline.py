@@ -42,7 +42,7 @@ from .topology import TopologySettings, resolve_topology
 from .upright import UprightSettings, make_upright
 
 __all__ = ["PipelineSettings", "View", "Reconstruction", "reconstruct", "run_reconstruction",
-           "measure_radius", "read_masks", "cable_colour", "sequence_cameras"]
+           "measure_radius", "read_masks", "cable_colour", "path_colours", "sequence_cameras"]
 
 log = logging.getLogger(__name__)
 
@@ -375,6 +375,35 @@ def cable_colour(image, mask):
     return tuple(float(c) / 255.0 for c in np.median(pixels[:, :3], axis=0))
 
 
+def path_colours(paths, camera, image, mask, *, reach=2):
+    """Each path's colour in one frame: the median of the mask's pixels within ``reach``
+    pixels of its projected centreline (sRGB, 0 to 1; None where it shows none).
+
+    Parameters
+    ----------
+    paths : sequence
+        Anything with ``points`` (N, 3) and ``closed``.
+    camera : Camera
+        The frame's camera.
+    image, mask : ndarray
+        The frame (RGB) and its cable mask.
+
+    Returns
+    -------
+    tuple
+    """
+    mask = np.asarray(mask, dtype=bool)
+    colours = []
+    for path in paths:
+        pixels, depth = camera.project(np.asarray(path.points))
+        line = np.zeros(mask.shape, dtype=np.uint8)
+        ahead = np.round(pixels[depth > 0] - 0.5).astype(np.int32)  # COLMAP: centres at +0.5
+        if len(ahead) > 1:
+            cv2.polylines(line, [ahead], bool(path.closed), 1, 2 * reach + 1)
+        colours.append(cable_colour(image, (line > 0) & mask))
+    return tuple(colours)
+
+
 def _scale_factor(fits, radius, diameter, length):
     """The factor to metres asked for (``diameter`` in mm or ``length`` in m), or None."""
     if diameter is not None:
@@ -432,6 +461,8 @@ class Reconstruction:
         The cameras were estimated (so the scale is arbitrary unless asked for).
     colour : tuple of float or None
         The cable's colour (sRGB, 0 to 1).
+    path_colours : tuple
+        Each path's colour (:func:`path_colours`) when there are several, else empty.
     checks : dict
         The masks' checks (:mod:`.mask_checks`): ``"core_thickness"`` and ``"unexplained"``
         (the mean share of mask pixels away from the curve).
@@ -450,6 +481,7 @@ class Reconstruction:
     length: float = None
     estimated: bool = False
     colour: tuple = None
+    path_colours: tuple = ()
     checks: dict = field(default_factory=dict)
 
     def flip(self, index, *, progress=None, cancel=None):
@@ -576,7 +608,12 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         reference = min(settings.reference_frame, len(sequence) - 1)
         order = [reference] + [k for k in range(len(sequence)) if k != reference]
         number = next((k for k in order if frame_masks[k].any()), reference)
-        colour_seen = cable_colour(sequence.read(number), frame_masks[number]())
+        image, mask = sequence.read(number), frame_masks[number]()
+        colour_seen = cable_colour(image, mask)
+        camera = next((view.camera for view in views
+                       if view.camera.name == sequence.names[number]), None)
+        colours = path_colours(topology.paths, camera, image, mask) \
+            if len(topology.paths) > 1 and camera is not None else ()
     stage = clock.stage("fit")
     evidence = [ImageEvidence.from_mask(view.camera, unpacked(view.mask),
                                         unpacked(view.junctions), settings=settings.fit)
@@ -586,7 +623,8 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         result=None, views=tuple(views), topology=topology, evidence=tuple(evidence),
         voxels=voxels, carved_radius=grid.radius, up=up, settings=settings,
         warnings=tuple(warnings), diameter=diameter, length=length,
-        estimated=cameras is None, colour=colour_seen, checks={"core_thickness": thickness})
+        estimated=cameras is None, colour=colour_seen, path_colours=colours,
+        checks={"core_thickness": thickness})
     return state._fitted(clock, stage, cancel)
 
 
@@ -680,7 +718,9 @@ def _finish(fits, crossings, state, clock):
         if state.estimated:
             warnings.append("the cameras were estimated, so the scale is arbitrary: give "
                             "--diameter or --length for metres")
-    paths = [CablePath(points, closed=fit.closed) for points, fit in zip(fits_points, fits)]
+    colours = state.path_colours or (None,) * len(fits)
+    paths = [CablePath(points, closed=fit.closed, colour=colour)
+             for points, fit, colour in zip(fits_points, fits, colours)]
     clock.progress(1.0, "done")
     return Result(radius=radius, paths=paths, crossings=crossings, cameras=cameras, units=units,
                   warnings=warnings, timings=dict(clock.timings),

@@ -40,6 +40,14 @@ def _points_array(value, where):
     return points
 
 
+def _srgb(colour):
+    """A colour as three floats in [0, 1]; ValueError otherwise."""
+    colour = tuple(float(c) for c in colour)
+    if len(colour) != 3 or not all(0.0 <= c <= 1.0 for c in colour):
+        raise ValueError("colour must be three numbers in [0, 1] (sRGB)")
+    return colour
+
+
 def _readonly(array):
     array = np.array(array, dtype=np.float64)
     array.setflags(write=False)
@@ -58,11 +66,15 @@ class CablePath:
         Radius at each sample, when it varies along the cable.
     closed : bool
         The last point joins the first.
+    colour : tuple of float or None
+        This cable's colour as seen in the frames (sRGB, 0 to 1), when a result holds several
+        cables; an optional field of the format (``"colour": [r, g, b]`` in the path).
     """
 
     points: np.ndarray
     radii: np.ndarray = None
     closed: bool = False
+    colour: tuple = None
 
     def __post_init__(self):
         points = _points_array(self.points, "points")
@@ -77,6 +89,8 @@ class CablePath:
                 raise ValueError("radii must be positive finite numbers")
             object.__setattr__(self, "radii", _readonly(radii))
         object.__setattr__(self, "closed", bool(self.closed))
+        if self.colour is not None:
+            object.__setattr__(self, "colour", _srgb(self.colour))
 
     @property
     def length(self):
@@ -166,10 +180,7 @@ class Result:
         if not self.paths:
             raise ValueError("a result needs at least one path")
         if self.colour is not None:
-            colour = tuple(float(c) for c in self.colour)
-            if len(colour) != 3 or not all(0.0 <= c <= 1.0 for c in colour):
-                raise ValueError("colour must be three numbers in [0, 1] (sRGB)")
-            object.__setattr__(self, "colour", colour)
+            object.__setattr__(self, "colour", _srgb(self.colour))
         for k, crossing in enumerate(self.crossings):
             for role in ("over", "under"):
                 ref = getattr(crossing, role)
@@ -187,6 +198,8 @@ class Result:
             if path.radii is not None:
                 entry["radii"] = path.radii.tolist()
             entry["closed"] = path.closed
+            if path.colour is not None:
+                entry["colour"] = list(path.colour)
             paths.append(entry)
         document = {
             "format": RESULT_FORMAT,
@@ -207,6 +220,16 @@ class Result:
         if self.colour is not None:
             document["colour"] = list(self.colour)
         return document
+
+
+def _colour_field(colour, where):
+    """An optional ``[r, g, b]`` field (numbers in [0, 1]), or :class:`ResultFormatError`."""
+    if colour is not None and not (
+            isinstance(colour, list) and len(colour) == 3
+            and all(isinstance(c, (int, float)) and not isinstance(c, bool) and 0 <= c <= 1
+                    for c in colour)):
+        raise ResultFormatError(f"{where} must be [r, g, b] with numbers in [0, 1]")
+    return colour
 
 
 def _require(data, key, kind, where):
@@ -274,7 +297,8 @@ def result_from_dict(data):
         closed = raw.get("closed", False)
         if not isinstance(closed, bool):
             raise ResultFormatError(f"{where}.closed must be true or false")
-        paths.append(CablePath(points, radii, closed))
+        paths.append(CablePath(points, radii, closed,
+                               _colour_field(raw.get("colour"), f"{where}.colour")))
     for key in ("crossings", "cameras"):
         if not isinstance(data.get(key, []), list):
             raise ResultFormatError(f"result.{key} must be a list")
@@ -303,12 +327,7 @@ def result_from_dict(data):
     if not isinstance(timings, dict) or not all(
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in timings.values()):
         raise ResultFormatError("result.timings must map stage names to seconds")
-    colour = data.get("colour")
-    if colour is not None and not (
-            isinstance(colour, list) and len(colour) == 3
-            and all(isinstance(c, (int, float)) and not isinstance(c, bool) and 0 <= c <= 1
-                    for c in colour)):
-        raise ResultFormatError("result.colour must be [r, g, b] with numbers in [0, 1]")
+    colour = _colour_field(data.get("colour"), "result.colour")
     try:
         return Result(radius=float(radius), paths=tuple(paths), crossings=tuple(crossings),
                       cameras=tuple(cameras), units=units, warnings=tuple(warnings),

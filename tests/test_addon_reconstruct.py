@@ -367,3 +367,22 @@ def test_batch_command_writes_a_blend_that_reopens_with_the_curve(addon, capture
                            str(tmp_path / "x.blend"), "-q"]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert handle_command(["reconstruct"]) == 2
+
+
+def test_each_cable_gets_a_material_in_its_colour(empty_scene, small_result):
+    from dataclasses import replace
+
+    from cable_reconstruction.addon.scene_objects import add_cable_materials, build_cable_curve
+
+    collection = bpy.data.collections.new("pair")
+    one = build_cable_curve(small_result, "one", collection)
+    add_cable_materials(one, replace(small_result, colour=(0.8, 0.1, 0.1)), "one")
+    assert len(one.data.materials) == 1  # no path colours: one material, the cable's
+    red, blue = (0.8, 0.1, 0.1), (0.1, 0.2, 0.9)
+    result = replace(small_result, paths=tuple(
+        replace(path, colour=colour) for path, colour in zip(small_result.paths, (red, blue))))
+    two = build_cable_curve(result, "two", collection)
+    add_cable_materials(two, result, "two")
+    assert [spline.material_index for spline in two.data.splines] == [0, 1]
+    first, second = (material.diffuse_color[:3] for material in two.data.materials)
+    assert first[0] > 5 * first[2] and second[2] > 5 * second[0]

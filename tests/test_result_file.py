@@ -40,6 +40,12 @@ def test_the_optional_colour_round_trips(small_result, tmp_path):
     assert read_result(write_result(coloured, tmp_path / "b.json")).colour == (0.8, 0.1, 0.05)
     with pytest.raises(ValueError, match="colour"):
         replace(small_result, colour=(2.0, 0.0, 0.0))
+    # several cables: each path its own colour
+    paths = (replace(small_result.paths[0], colour=(0.1, 0.2, 0.9)), small_result.paths[1])
+    back = read_result(write_result(replace(small_result, paths=paths), tmp_path / "c.json"))
+    assert back.paths[0].colour == (0.1, 0.2, 0.9) and back.paths[1].colour is None
+    with pytest.raises(ValueError, match="colour"):
+        replace(small_result.paths[0], colour=(0.5, -0.1, 0.0))
 
 
 def test_file_follows_the_documented_layout(small_result, tmp_path):
@@ -97,6 +103,7 @@ def _valid(small_result):
     (lambda d: d.update(warnings="oops"), "warnings must be"),
     (lambda d: d.update(colour=[1.0, 0.2]), "colour must be"),
     (lambda d: d.update(colour=[1.0, 0.2, 255]), "colour must be"),
+    (lambda d: d["paths"][1].update(colour=[0.5, "red", 0.1]), r"paths\[1\].colour must be"),
 ])
 def test_malformed_files_get_a_clear_message(small_result, tmp_path, mutate, message):
     data = _valid(small_result)

@@ -143,3 +143,12 @@ def test_two_cables_give_two_paths_and_their_crossings(tmp_path):
     assert metrics.path_count == 2 and metrics.one_path
     assert metrics.crossings_right == metrics.crossings_total == 3
     assert metrics.accuracy_mean < 0.3
+    # each path carries its own cable's colour (the material Blender gives it)
+    truth = scene.truth
+    for path in state.result.paths:
+        cable = truth.cable_of(int(np.argmin(np.linalg.norm(
+            truth.centreline - path.points[len(path.points) // 2], axis=1))))
+        colour = (spec.look.cable_colour, spec.look.other_cable_colour)[cable]
+        seen = tuple(int(round(255 * c)) for c in path.colour)
+        gap = abs(hue_of(seen) - hue_of(colour))
+        assert min(gap, 180 - gap) < 12
