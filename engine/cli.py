@@ -169,7 +169,8 @@ def _family_options(args):
         raise InputError(f"unknown look famil{'ies' if len(unknown) > 1 else 'y'} "
                          f"{', '.join(unknown) or '(none given)'}: choose from "
                          f"{', '.join(LOOK_FAMILIES)}")
-    return {"families": families, "captures": None, "real": None}
+    options = {"families": families, "captures": None}
+    return {**options, "real": None} if args.stage == "looks" else options
 
 
 def _run_bench(args):

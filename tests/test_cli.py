@@ -1,7 +1,10 @@
 """`python -m engine` as a pipeline runs it: version, help, exit codes."""
 
+import inspect
 import subprocess
 import sys
+
+import pytest
 
 from conftest import ROOT
 from engine import __version__
@@ -98,3 +101,24 @@ def test_bench_families_are_checked_before_the_work():
     done = run_engine("bench", "looks", "--families", "saturated,tartan")
     assert done.returncode == 2
     assert "unknown look family tartan" in done.stderr and "two_cables" in done.stderr
+
+
+@pytest.mark.parametrize("stage", ["looks", "pipeline-looks"])
+def test_bench_families_reach_the_bench(monkeypatch, capsys, stage):
+    import engine.look_benchmark
+    import engine.pipeline_benchmark
+    from engine.cli import main
+
+    calls = []
+    for module, name in ((engine.look_benchmark, "bench_looks"),
+                         (engine.pipeline_benchmark, "bench_pipeline_looks")):
+        signature = inspect.signature(getattr(module, name))
+
+        def fake(*args, _signature=signature, **kwargs):
+            _signature.bind(*args, **kwargs)  # the bench takes what the command line gives
+            calls.append(kwargs)
+            return [{"looks": "x"}]
+
+        monkeypatch.setattr(module, name, fake)
+    assert main(["-q", "bench", stage, "--families", "two_cables,pale"]) == 0
+    assert calls[-1]["families"] == ("two_cables", "pale") and calls[-1]["captures"] is None
