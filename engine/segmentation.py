@@ -52,6 +52,9 @@ _HUE_APART = 25
 _HUE_SHARE = 0.15
 _THIN_SHARE = 0.5
 
+#: :func:`_joined`: the seam between two cables' masks is filled up to this many cable widths.
+_SEAM = 0.15
+
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "SeveralCables",
            "auto_colour", "reference_frames", "sequence_colour", "learn_colour_model",
            "colour_seed", "colour_at", "segment_frame", "cable_mask", "refine_edges", "cable_width",
@@ -754,16 +757,33 @@ def _several_masks(image_rgb, several, settings):
     between two passes of another is a small piece of its own mask, not of the joined one."""
     alone = replace(settings, speck_area=0.0)
     found = [_cable_masks(image_rgb, colour, alone, model) for colour, model in several.cables]
-    mask = np.logical_or.reduce([m for m, _, _ in found])
-    colour_range_mask = np.logical_or.reduce([m for _, m, _ in found])
     areas = np.array([np.count_nonzero(m) if w > 0 else 0 for m, _, w in found], dtype=float)
     width = float(np.dot(areas, [w for _, _, w in found]) / areas.sum()) if areas.sum() else 0.0
+    mask = _joined([m for m, _, _ in found], width)
+    colour_range_mask = _joined([m for _, m, _ in found], width)
     if width > 0 and settings.speck_area > 0:
         for joined in (mask, colour_range_mask):
             half = cv2.resize(joined.view(np.uint8), (joined.shape[1] // 2, joined.shape[0] // 2),
                               interpolation=cv2.INTER_AREA) > 0
             joined &= _remove_specks(joined, half, settings.speck_area * width * width)
     return mask, colour_range_mask, width
+
+
+def _joined(masks, width):
+    """The union of several cables' masks with the seam where two touch filled: where one
+    passes over the other, each outline stops short of the dark contact line between them,
+    and a gap there would cut the strand below off at the crossing (no junction, a break).
+    Seam pixels lie within ``_SEAM`` widths (a pixel at least) of two of the masks."""
+    union = np.logical_or.reduce(masks)
+    if len(masks) < 2 or width <= 0:
+        return union
+    reach = max(int(round(_SEAM * width)), 1)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+    near = [cv2.dilate(m.view(np.uint8), disc) > 0 for m in masks]
+    for a in range(len(near)):
+        for b in range(a + 1, len(near)):
+            union |= near[a] & near[b]
+    return union
 
 
 def _channel_percentile(image, channel, mask, percent):

@@ -11,8 +11,8 @@ from engine.ground_truth import GroundTruth, TrueCrossing, read_ground_truth
 from engine.metrics import evaluate
 from engine.pipeline import PipelineSettings, run_reconstruction
 from engine.result import CablePath, Result
-from engine.segmentation import (SegmentationSettings, SeveralCables, reference_frames,
-                                 segment_frame, sequence_colour)
+from engine.segmentation import (SegmentationSettings, SeveralCables, _joined,
+                                 reference_frames, segment_frame, sequence_colour)
 from engine.synthetic_layouts import find_crossings_2d, pair_layout
 from engine.synthetic_scene import look_scene, look_spec, make_scene, write_scene
 
@@ -152,3 +152,17 @@ def test_two_cables_give_two_paths_and_their_crossings(tmp_path):
         seen = tuple(int(round(255 * c)) for c in path.colour)
         gap = abs(hue_of(seen) - hue_of(colour))
         assert min(gap, 180 - gap) < 12
+
+
+def test_the_seam_where_one_cable_passes_over_another_is_filled():
+    first = np.zeros((60, 80), bool)
+    first[:, 30:42] = True  # a cable 12 pixels wide, passing over...
+    second = np.zeros_like(first)
+    second[24:36, :29] = True  # ...another, whose outline stops a pixel short of it
+    second[24:36, 43:] = True
+    joined = _joined([first, second], 12.0)
+    assert joined[30, 29] and joined[30, 42]  # the seam
+    assert cv2.connectedComponents(joined.view(np.uint8))[0] == 2  # one piece
+    apart = np.zeros_like(first)
+    apart[24:36, :20] = True  # ten pixels away: not a seam
+    assert not _joined([first, apart], 12.0)[30, 25]
