@@ -393,6 +393,8 @@ class _TrueLine(_Polylines):
         offsets = [np.full(len(points) - (0 if closed else 1), arc[cable.start])
                    for (points, closed), cable in zip(truth.lines, truth.cables)]
         self.seg_arc = self.seg_arc + np.concatenate(offsets)
+        self.seg_cable = np.concatenate([np.full(len(offset), number)
+                                         for number, offset in enumerate(offsets)])
         self.length = float(self.seg_arc[-1] + self.seg_len[-1])
         self.is_closed = truth.closed
         self.seg_arc_twice = np.concatenate([self.seg_arc, self.seg_arc + self.length])
@@ -468,7 +470,7 @@ class Metrics:
     completeness : float
         Fraction of the true centreline's length within ``coverage`` (1 r) of the reconstruction.
     one_path : bool
-        Exactly one path per true cable and no wrong connection.
+        Exactly one path per true cable (each on its own cable) and no wrong connection.
     path_count : int
     wrong_connections : int
         Steps along a reconstructed path that jump along the true cable, plus the times a path
@@ -640,6 +642,16 @@ def _listed(truth, crossing, line, recon, positions, result, settings, r):
     return answer, confidence
 
 
+def _one_path_per_cable(line, recon, seg, cables):
+    """As many paths as true cables, each on a cable of its own (the one most of its samples
+    lie nearest to)."""
+    if len(recon.slices) != cables:
+        return False
+    owners = {int(np.bincount(line.seg_cable[seg[part]], minlength=cables).argmax())
+              for part in recon.slices}
+    return len(owners) == cables
+
+
 def evaluate(result, truth, *, align=False, settings=None):
     """Measure a reconstruction against the ground truth.
 
@@ -680,7 +692,7 @@ def evaluate(result, truth, *, align=False, settings=None):
                        settings.sample_spacing * r)
 
     # Accuracy: reconstruction samples to the true polyline.
-    distance, _, arc = line.nearest(recon.dense)
+    distance, seg, arc = line.nearest(recon.dense)
     weights = recon.weights if recon.weights.sum() > 0 else np.ones(len(recon.dense))
     accuracy = distance / r
     accuracy_mean = float(np.sum(accuracy * weights) / weights.sum())
@@ -708,7 +720,7 @@ def evaluate(result, truth, *, align=False, settings=None):
         accuracy_p95=accuracy_p95,
         accuracy_max=accuracy_max,
         completeness=completeness,
-        one_path=len(result.paths) == len(truth.cables) and wrong == 0,
+        one_path=_one_path_per_cable(line, recon, seg, len(truth.cables)) and wrong == 0,
         path_count=len(result.paths),
         wrong_connections=int(wrong),
         crossings_right=sum(check.right for check in details),

@@ -70,6 +70,10 @@ def test_metrics_want_one_path_per_cable():
     half = evaluate(Result(radius=truth.radius,
                            paths=(CablePath(truth.centreline[truth.cables[0]]),)), truth)
     assert not half.one_path and half.completeness < 0.8
+    first = truth.centreline[truth.cables[0]]  # two paths, both on the first cable
+    twice = evaluate(Result(radius=truth.radius, paths=(
+        CablePath(first[:len(first) // 2]), CablePath(first[len(first) // 2:]))), truth)
+    assert twice.path_count == 2 and twice.wrong_connections == 0 and not twice.one_path
 
 
 @pytest.fixture(scope="module")
