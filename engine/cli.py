@@ -75,8 +75,9 @@ def _run_segment(args):
         reference_frame=args.reference_frame, overwrite=args.overwrite, cameras=args.cameras,
         agreement=_agreement_settings(args), carving=settings_from_arguments(CarvingSettings, args),
         progress=None if args.quiet else ProgressBar())
-    log.info("%d frames, cable %.1f-%.1f px wide, --hsv %s", len(widths), min(widths),
-             max(widths), colour)
+    several = settings.all_cables and args.hsv is None  # each cable's colour was logged
+    log.info("%d frames, cable %.1f-%.1f px wide%s", len(widths), min(widths), max(widths),
+             ", every cable of its own colour" if several else f", --hsv {colour}")
 
 
 def _run_cameras(args):

@@ -116,10 +116,10 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         frames = reference_frames(len(sequence), reference_frame, settings.model_frames)
         found = colour is None
         colour, model = sequence_colour([sequence.read(k) for k in frames], colour, settings)
-        if found and isinstance(model, SeveralCables):
-            log.info("%d cables found on %s: --hsv %s", len(model.cables),
+        if found and isinstance(model, SeveralCables) and len(model.cables) > 1:
+            log.info("%d cables found on %s, their colours (as --hsv): %s", len(model.cables),
                      sequence.names[reference_frame],
-                     " / ".join(str(cable) for cable, _ in model.cables))
+                     "; ".join(str(cable) for cable, _ in model.cables))
         elif found:
             log.info("cable colour found on %s: --hsv %s", sequence.names[reference_frame], colour)
         agree = agreement.rounds > 0

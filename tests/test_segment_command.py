@@ -133,3 +133,18 @@ def test_junction_scores_count_found_and_stray(scene_folder):
 def test_format_table():
     table = format_table([{"scene": "a", "iou": 0.91234, "n": 3}])
     assert table.splitlines() == ["| scene | iou | n |", "|---|---|---|", "| a | 0.912 | 3 |"]
+
+
+def test_segment_all_cables_writes_every_cable(tmp_path):
+    from engine.synthetic_scene import look_scene
+
+    scene = look_scene("two_cables", 3, views=6, width=640, height=480)
+    folder = write_scene(scene, tmp_path / "pair")
+    run = run_engine("segment", folder / "images", "-o", tmp_path / "out", "--all-cables",
+                     "--no-agreement")
+    assert run.returncode == 0, run.stderr
+    assert "2 cables found on 000.jpg" in run.stderr and "every cable" in run.stderr
+    for camera, truth in zip(scene.cameras, scene.masks):
+        mask = cv2.imread(str(tmp_path / "out" / "masks" / (camera.name[:-4] + ".png")),
+                          cv2.IMREAD_GRAYSCALE) > 0
+        assert (mask & truth).sum() / (mask | truth).sum() > 0.85
