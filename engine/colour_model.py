@@ -30,7 +30,7 @@ from scipy.ndimage import gaussian_filter
 from .colour_range import ColourRange, hsv_image
 from .errors import ReconstructionError
 
-__all__ = ["ColourModel", "find_cable", "range_of", "thin_pieces", "reduced", "colour_candidates",
+__all__ = ["ColourModel", "find_cable", "find_cables", "range_of", "thin_pieces", "reduced", "colour_candidates",
            "CableCandidate", "opened"]
 
 #: Frames are clustered and scored at this size (the longer side, pixels); larger frames are
@@ -44,6 +44,13 @@ _CLUSTERS = 8
 _MAX_LOOPS = 12
 #: A cable covers at most this share of a frame.
 _MAX_COVERAGE = 0.3
+#: :func:`find_cables`: weighs ``_MORE`` candidates; another cable scores at least ``_ANOTHER``
+#: of the best over the frames, and its hue lies ``_HUE_APART`` (OpenCV units) from theirs;
+#: pixels of saturation and value of ``_HUED`` or more have a hue.
+_ANOTHER = 0.3
+_MORE = 6
+_HUE_APART = 25
+_HUED = 50
 
 
 def reduced(image_rgb, size=_SMALL):
@@ -328,14 +335,87 @@ def find_cable(images_rgb):
     ReconstructionError
         No candidate is thin (no cable pixels).
     """
-    images_rgb = list(images_rgb)
-    size, (small, candidates) = _SMALL, colour_candidates(images_rgb[0])
-    larger = 2 * _SMALL
-    while larger < max(images_rgb[0].shape[:2]):
-        found = colour_candidates(images_rgb[0], size=larger)
-        if _best_score(found[1]) >= _SHARPER * _best_score(candidates):
-            size, (small, candidates) = larger, found
-        larger *= 2
+    small, candidates, totals = _ranked(list(images_rgb), keep=3)
+    best = candidates[int(np.argmax(totals))]
+    return range_of(hsv_image(small)[best.mask]), best
+
+
+def find_cables(images_rgb):
+    """Every cable the frames hold in a colour of its own: the most cable-like of
+    :data:`_MORE` candidates (more than :func:`find_cable` weighs: a group of two cables'
+    colours may rank below one cable's on the first frame and above it over the frames),
+    then each further candidate at least :data:`_ANOTHER` as cable-like over the frames,
+    sharing no colour cluster with those found, of a hue (not colourless) at least
+    :data:`_HUE_APART` from theirs (a candidate of a found cable's hue is its shading or a
+    table of its hue).
+
+    Two cables that cross are often one candidate (one thin object of two colours), which
+    :func:`.segmentation.sequence_colour` splits by hue.
+
+    Returns
+    -------
+    list of (ColourRange, CableCandidate)
+        The most cable-like first.
+    """
+    small, candidates, totals = _ranked(list(images_rgb), keep=_MORE)
+    hsv = hsv_image(small)
+    best = candidates[int(np.argmax(totals))]
+    found, taken = [(range_of(hsv[best.mask]), best)], set(best.members)
+    hues = [_hue_of(hsv[best.mask])]
+    reference = max(totals)
+    for total, candidate in sorted(zip(totals, candidates), key=lambda item: -item[0]):
+        hue = _hue_of(hsv[candidate.mask])
+        if (total < _ANOTHER * reference or taken & set(candidate.members) or hue is None
+                or any(h is not None and _hue_gap(h, hue) < _HUE_APART for h in hues)):
+            continue
+        found.append((range_of(hsv[candidate.mask]), candidate))
+        taken |= set(candidate.members)
+        hues.append(hue)
+    return found
+
+
+def _hue_of(hsv_pixels):
+    """The circular mean hue of pixels (OpenCV units) of saturation and value of
+    :data:`_HUED` or more, None when fewer than half of them are."""
+    hued = (hsv_pixels[:, 1] >= _HUED) & (hsv_pixels[:, 2] >= _HUED)
+    if not len(hsv_pixels) or hued.mean() < 0.5:
+        return None
+    angle = hsv_pixels[hued, 0].astype(float) * (2 * math.pi / 180.0)
+    return (math.degrees(math.atan2(np.sin(angle).mean(), np.cos(angle).mean())) / 2.0) % 180.0
+
+
+def _hue_gap(a, b):
+    gap = abs(a - b) % 180.0
+    return min(gap, 180.0 - gap)
+
+
+def _ranked(images_rgb, keep, size=None):
+    """The first frame's ``keep`` best candidates and their scores summed over the frames.
+
+    The scoring size is ``size``, or :data:`_SMALL` or larger (:data:`_SHARPER`).
+
+    Returns
+    -------
+    small : ndarray
+        The first frame at the scoring size.
+    candidates : list of CableCandidate
+    totals : ndarray
+
+    Raises
+    ------
+    ReconstructionError
+        No candidate is thin (no cable pixels).
+    """
+    if size is None:
+        size, (small, candidates) = _SMALL, colour_candidates(images_rgb[0], keep=keep)
+        larger = 2 * _SMALL
+        while larger < max(images_rgb[0].shape[:2]):
+            found = colour_candidates(images_rgb[0], size=larger, keep=keep)
+            if _best_score(found[1]) >= _SHARPER * _best_score(candidates):
+                size, (small, candidates) = larger, found
+            larger *= 2
+    else:
+        small, candidates = colour_candidates(images_rgb[0], size=size, keep=keep)
     candidates = [candidate for candidate in candidates if candidate.score > 0]
     if not candidates:
         raise ReconstructionError("no cable pixels: nothing thin of one colour stands out in "
@@ -349,8 +429,7 @@ def find_cable(images_rgb):
         for index, candidate in enumerate(candidates):
             totals[index] += _score(opened(np.isin(labels, candidate.members)), other_lab,
                                     diagonal)
-    best = candidates[int(np.argmax(totals))]
-    return range_of(hsv_image(small)[best.mask]), best
+    return small, candidates, totals
 
 
 def model_space(image_rgb):

@@ -24,7 +24,8 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .colour_model import ColourModel, find_cable, opened, range_of, reduced, thin_pieces
+from .colour_model import (_HUE_APART, _HUED, ColourModel, find_cable, find_cables, opened,
+                           range_of, reduced, thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 
@@ -47,8 +48,6 @@ _COLOUR_SIZE = 3840
 #: hues whose peaks lie at least ``_HUE_APART`` apart (OpenCV units, 2 degrees each) and hold
 #: ``_HUE_SHARE`` of those pixels each are different cables when each hue's pixels lie mostly
 #: (``_THIN_SHARE``) in thin pieces (a stripe's bands do not).
-_HUED = 50
-_HUE_APART = 25
 _HUE_SHARE = 0.15
 _THIN_SHARE = 0.5
 
@@ -250,18 +249,20 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
     frames = [reduced(frame, _COLOUR_SIZE) for frame in frames]
     if colour is not None:
         return colour, learn_colour_model(frames, colour, settings) if settings.model else None
-    colour, candidate = find_cable(frames)
     if not settings.all_cables:
+        colour, candidate = find_cable(frames)
         return _learnt(frames, [colour_seed(frame, candidate, settings) for frame in frames],
                        colour, settings)
     # split by hue first, then each cable's shade side is found with its own colour
     bare = replace(settings, seed_shade_reach=0.0)
-    parts = _split_by_hue(frames, [colour_seed(frame, candidate, bare) for frame in frames])
+    found = find_cables(frames)
+    parts = [part for colour, candidate in found for part in _split_by_hue(
+        frames, [colour_seed(frame, candidate, bare) for frame in frames])]
     if settings.seed_shade_reach > 0:
         parts = [[(_with_shade(frame, seed, objects, width, settings) if seed.any() else seed,
                    objects, width) for frame, (seed, objects, width) in zip(frames, part)]
                  for part in parts]
-    cables = [_learnt(frames, part, colour, settings) for part in parts]
+    cables = [_learnt(frames, part, found[0][0], settings) for part in parts]
     return cables[0][0], SeveralCables(cables)
 
 

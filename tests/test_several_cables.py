@@ -128,11 +128,17 @@ def test_all_cables_learns_a_model_per_cable_and_masks_both(pair_scene):
         assert iou(joined.mask, pair_scene.masks[k]) > iou(alone.mask, pair_scene.masks[k])
 
 
-def test_one_cable_is_not_split_by_all_cables():
-    scene = look_scene("saturated", 1, views=10, width=640, height=480)
+@pytest.mark.parametrize("family, seed, count", [
+    ("two_cables", 11, 2),  # the best candidate holds one cable's colours only
+    ("saturated", 1, 1),
+    ("same_hue", 1, 1),  # a table of the cable's hue is not another cable
+    ("pale", 0, 1),  # nor is a colourless part of the table
+])
+def test_all_cables_finds_each_cable_and_nothing_else(family, seed, count):
+    scene = look_scene(family, seed, views=10, width=640, height=480)
     frames = [scene.images[k] for k in reference_frames(10, 0, 3)]
     _, several = sequence_colour(frames, None, SegmentationSettings(all_cables=True))
-    assert len(several.cables) == 1
+    assert len(several.cables) == count
 
 
 def test_two_cables_give_two_paths_and_their_crossings(tmp_path):
