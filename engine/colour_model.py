@@ -30,8 +30,8 @@ from scipy.ndimage import gaussian_filter
 from .colour_range import ColourRange, hsv_image
 from .errors import ReconstructionError
 
-__all__ = ["ColourModel", "find_cable", "find_cables", "range_of", "thin_pieces", "reduced", "colour_candidates",
-           "CableCandidate", "opened"]
+__all__ = ["ColourModel", "find_cable", "find_cables", "range_of", "thin_pieces", "reduced",
+           "colour_candidates", "CableCandidate", "opened"]
 
 #: Frames are clustered and scored at this size (the longer side, pixels); larger frames are
 #: also tried at twice, four times... the size, and a larger size is chosen when its best

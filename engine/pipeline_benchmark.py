@@ -41,6 +41,7 @@ def pipeline_suite(views=30):
         ("hanging", SceneSpec(kind="hanging", seed=5, **table)),
         ("table 3, r 1 mm", SceneSpec(crossings=3, seed=7, radius=0.001, **table)),
         ("table 3, r 10 mm", SceneSpec(crossings=3, seed=8, radius=0.01, **table)),
+        ("pair 3, one colour", SceneSpec(kind="pair", crossings=3, seed=1, **table)),
     ]
 
 
