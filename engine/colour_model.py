@@ -385,8 +385,9 @@ def _hue_of(hsv_pixels):
 
 
 def _hue_gap(a, b):
-    gap = abs(a - b) % 180.0
-    return min(gap, 180.0 - gap)
+    """How far apart two hues (or arrays of them) lie around OpenCV's circle of 180."""
+    gap = np.abs(np.asarray(a, dtype=np.float64) - b) % 180.0
+    return np.minimum(gap, 180.0 - gap)
 
 
 def _ranked(images_rgb, keep, size=None):

@@ -24,8 +24,8 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .colour_model import (_HUE_APART, _HUED, ColourModel, find_cable, find_cables, opened,
-                           range_of, reduced, thin_pieces)
+from .colour_model import (_HUE_APART, _HUED, ColourModel, _hue_gap, find_cable, find_cables,
+                           opened, range_of, reduced, thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 
@@ -255,14 +255,15 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
                        colour, settings)
     # split by hue first, then each cable's shade side is found with its own colour
     bare = replace(settings, seed_shade_reach=0.0)
-    found = find_cables(frames)
-    parts = [part for colour, candidate in found for part in _split_by_hue(
-        frames, [colour_seed(frame, candidate, bare) for frame in frames])]
+    parts = [(colour, part) for colour, candidate in find_cables(frames)
+             for part in _split_by_hue(frames, [colour_seed(frame, candidate, bare)
+                                                for frame in frames])]
     if settings.seed_shade_reach > 0:
-        parts = [[(_with_shade(frame, seed, objects, width, settings) if seed.any() else seed,
-                   objects, width) for frame, (seed, objects, width) in zip(frames, part)]
-                 for part in parts]
-    cables = [_learnt(frames, part, found[0][0], settings) for part in parts]
+        parts = [(colour, [(_with_shade(frame, seed, objects, width, settings)
+                            if seed.any() else seed, objects, width)
+                           for frame, (seed, objects, width) in zip(frames, part)])
+                 for colour, part in parts]
+    cables = [_learnt(frames, part, colour, settings) for colour, part in parts]
     return cables[0][0], SeveralCables(cables)
 
 
@@ -319,7 +320,7 @@ def _hue_peaks(hues):
     for hue in np.argsort(-mass, kind="stable"):
         if mass[hue] < _HUE_SHARE * len(hues):
             break
-        if all(min(abs(hue - p), 180 - abs(hue - p)) >= _HUE_APART for p in peaks):
+        if all(_hue_gap(hue, p) >= _HUE_APART for p in peaks):
             peaks.append(int(hue))
     return peaks
 
@@ -331,8 +332,7 @@ def _nearest_peak(hsv, seed, peaks):
     if not seed.any():
         return nearest
     hue = hsv[..., 0].astype(np.int64)
-    gaps = [np.minimum(np.abs(hue - p), 180 - np.abs(hue - p)) for p in peaks]
-    closest = np.argmin(np.stack(gaps), axis=0)
+    closest = np.argmin(np.stack([_hue_gap(hue, p) for p in peaks]), axis=0)
     hued = seed & (hsv[..., 1] >= _HUED) & (hsv[..., 2] >= _HUED)
     if not hued.any():
         return nearest

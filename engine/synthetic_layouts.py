@@ -461,9 +461,10 @@ def pair_layout(crossings=3, *, seed=0, radius=0.004, extent=None, gap=24.0,
             if np.linalg.norm(ends[0] - ends[1]) < 0.5 * gap:
                 continue
             keep = np.r_[0:cut - half, cut + half + 1:count]
-            shift = lambda i: int(i) if i < cut else int(i) - (2 * half + 1)  # noqa: E731
-            found = tuple(TrueCrossing(shift(c.over), shift(c.under), c.angle)
-                          for c in truth.crossings)
+            after = passes > cut  # samples after the cut move back by those taken out
+            moved = passes - after * (2 * half + 1)
+            found = tuple(TrueCrossing(int(over), int(under), c.angle)
+                          for (over, under), c in zip(moved, truth.crossings))
             return GroundTruth(truth.centreline[keep], radius, found, kind="pair",
                                breaks=(cut - half,))
     raise LayoutError(f"no pair layout with {crossings} crossings (seed {seed})")
