@@ -11,6 +11,11 @@ real photos with labels (``../shared/real/mbest-s1``, when present; they were lo
 tuning, so they are not held out). Frames are segmented on one core. A family of several
 cables (:data:`.synthetic_looks.SEVERAL_CABLES`) is segmented as a user asking for all of them
 would (``all_cables``), and scored against the masks of every cable.
+
+The *oracle seed* column is fed the truth and labelled so: every frame segmented with the
+colour model learnt from the **true** masks of the frames the model is learnt from. Where it
+is low, the classifier (the model and the rules after it) is what loses, not finding the
+cable; where ours is far below it, finding the cable or its seed is.
 """
 
 import time
@@ -21,7 +26,8 @@ import cv2
 import numpy as np
 
 from .image_sequence import read_image
-from .segmentation import SegmentationSettings, reference_frames, segment_frame, sequence_colour
+from .segmentation import (SegmentationSettings, colour_from_masks, reference_frames,
+                           segment_frame, sequence_colour)
 from .synthetic_looks import HELD_OUT_SEEDS, LOOK_FAMILIES, SEVERAL_CABLES, TUNING_SEEDS
 from .synthetic_scene import look_scene
 
@@ -46,14 +52,25 @@ def _iou(a, b):
     return float((a & b).sum() / max((a | b).sum(), 1))
 
 
-def score_sequence(images, truths, settings=SegmentationSettings()):
+def score_sequence(images, truths, settings=SegmentationSettings(), *, oracle=False):
     """Mask IoU of every frame (ours and the naive threshold's) and our times.
+
+    Parameters
+    ----------
+    images, truths : sequence of ndarray
+        The frames (RGB uint8) and their true cable masks.
+    settings : SegmentationSettings, optional
+    oracle : bool, optional
+        Also segment with the colour model learnt from the true masks of the same frames
+        (:func:`.segmentation.colour_from_masks`): the *oracle seed*, what the model and the
+        rules after it make of a perfect seed. Not with ``settings.all_cables``.
 
     Returns
     -------
     dict
-        ``iou``, ``naive`` (lists, one per frame), ``setup_ms`` (finding the cable and
-        learning its colour model on three frames), ``ms_per_frame`` and ``hsv``.
+        ``iou``, ``naive`` (lists, one per frame), ``oracle`` (a list, or None), ``setup_ms``
+        (finding the cable and learning its colour model on three frames), ``ms_per_frame``
+        and ``hsv``.
     """
     started = time.perf_counter()
     frames = reference_frames(len(images), 0, settings.model_frames)
@@ -63,7 +80,14 @@ def score_sequence(images, truths, settings=SegmentationSettings()):
     masks = [segment_frame(image, colour, settings, model=model).mask for image in images]
     seconds = time.perf_counter() - started
     ious = [_iou(mask, truth) for mask, truth in zip(masks, truths)]
+    oracle_ious = None
+    if oracle and not settings.all_cables:
+        known, known_model = colour_from_masks([images[k] for k in frames],
+                                               [truths[k] for k in frames], settings)
+        oracle_ious = [_iou(segment_frame(image, known, settings, model=known_model).mask,
+                            truth) for image, truth in zip(images, truths)]
     return {"iou": ious, "naive": [_iou(naive_mask(i), t) for i, t in zip(images, truths)],
+            "oracle": oracle_ious,
             "setup_ms": 1000.0 * setup, "ms_per_frame": 1000.0 * seconds / len(images),
             "hsv": str(colour)}
 
@@ -74,9 +98,20 @@ def _row(name, split, scores):
             "iou_mean": float(np.mean(scene_iou)), "iou_worst_scene": float(np.min(scene_iou)),
             "iou_worst_frame": float(min(np.min(s["iou"]) for s in scores)),
             "naive_iou_mean": float(np.mean([np.mean(s["naive"]) for s in scores])),
+            "oracle_seed_iou": _oracle_mean(scores),
             "cable_found": f"{sum(v > FOUND_IOU for v in scene_iou)}/{len(scores)}",
             "setup_ms": float(np.mean([s["setup_ms"] for s in scores])),
             "ms_per_frame": float(np.mean([s["ms_per_frame"] for s in scores]))}
+
+
+def _oracle_mean(scores):
+    """Mean over the scenes of the oracle seed's IoU; "" when no scene has one (several
+    cables), marked "(n)" when only n of them do."""
+    oracle = [float(np.mean(s["oracle"])) for s in scores if s.get("oracle") is not None]
+    if not oracle:
+        return ""
+    mean = f"{np.mean(oracle):.3f}"
+    return mean if len(oracle) == len(scores) else f"{mean} ({len(oracle)})"
 
 
 def _read_capture(folder, mask_folder):
@@ -90,7 +125,7 @@ def _read_capture(folder, mask_folder):
 
 def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samples") / "looks",
                 real=Path("..") / "shared" / "real" / "mbest-s1",
-                settings=SegmentationSettings(), families=LOOK_FAMILIES):
+                settings=SegmentationSettings(), families=LOOK_FAMILIES, oracle=True):
     """One row per look family and seed set, then the Cycles captures and real photos.
 
     Parameters
@@ -105,6 +140,10 @@ def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samp
         Real photos with labels (``images/``, ``labels/``); skipped when missing or None.
     settings : SegmentationSettings, optional
     families : sequence of str, optional
+    oracle : bool, optional
+        Add the *oracle seed* column (:func:`score_sequence`): what the colour model and the
+        rules after it make of the true masks as their seed, beside what they make of the
+        found cable's.
 
     Returns
     -------
@@ -122,14 +161,14 @@ def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samp
                     scores.append(score_sequence(
                         list(scene.images), list(scene.masks),
                         replace(settings, all_cables=True) if family in SEVERAL_CABLES
-                        else settings))
+                        else settings, oracle=oracle))
                 every[split] += scores
                 rows.append(_row(family, split, scores))
         for split, scores in every.items():
             rows.append(_row("all families", split, scores))
         if captures is not None and Path(captures).is_dir():
             captures = Path(captures)
-            scores = [score_sequence(*_read_capture(folder, "masks"), settings)
+            scores = [score_sequence(*_read_capture(folder, "masks"), settings, oracle=oracle)
                       for folder in sorted(captures.iterdir())
                       if (folder / "ground_truth.json").is_file()]
             if scores:
@@ -137,7 +176,8 @@ def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samp
         if real is not None and (Path(real) / "labels").is_dir():
             real = Path(real)
             rows.append(_row(f"real photos ({real.name})", "used in tuning",
-                             [score_sequence(*_read_capture(real, "labels"), settings)]))
+                             [score_sequence(*_read_capture(real, "labels"), settings,
+                                             oracle=oracle)]))
     finally:
         cv2.setNumThreads(threads)
     return rows

@@ -56,6 +56,7 @@ _SEAM = 0.15
 
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "SeveralCables",
            "auto_colour", "reference_frames", "sequence_colour", "learn_colour_model",
+           "colour_from_masks",
            "colour_seed", "colour_at", "segment_frame", "cable_mask", "refine_edges", "cable_width",
            "junction_map", "junction_centres"]
 
@@ -265,6 +266,40 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
                  for colour, part in parts]
     cables = [_learnt(frames, part, colour, settings) for colour, part in parts]
     return cables[0][0], SeveralCables(cables)
+
+
+def colour_from_masks(frames, masks, settings=SegmentationSettings()):
+    """The cable's colour and colour model learnt from given cable masks of a few frames
+    (masks corrected by hand, or the truth, as the looks bench's *oracle seed* does) instead
+    of a found or picked colour's thin pieces.
+
+    Parameters
+    ----------
+    frames : sequence of ndarray
+        RGB uint8.
+    masks : sequence of ndarray of bool
+        The cable's pixels in each frame.
+    settings : SegmentationSettings, optional
+
+    Returns
+    -------
+    colour : ColourRange
+        The range around the masks' pixels.
+    model : ColourModel or None
+        None when ``settings.model`` is off.
+
+    Raises
+    ------
+    ValueError
+        The masks hold no pixel, or their number is not the frames'.
+    """
+    frames, masks = list(frames), [np.asarray(mask, dtype=bool) for mask in masks]
+    if len(frames) != len(masks):
+        raise ValueError(f"{len(frames)} frames but {len(masks)} masks")
+    if not any(mask.any() for mask in masks):
+        raise ValueError("the masks hold no cable pixel")
+    seeds = [(mask, np.zeros_like(mask), cable_width(mask)) for mask in masks]
+    return _learnt(frames, seeds, None, settings)
 
 
 def _learnt(frames, seeds, colour, settings):

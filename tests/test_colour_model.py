@@ -221,3 +221,46 @@ def test_a_cable_like_a_shadow_keeps_every_pixel(table, cable_colour, shadow):
         cable = cable | dark
     assert _without_shadow(cable, image, 18.0, SegmentationSettings()).sum() >= \
         0.99 * cable.sum()
+
+
+def test_a_model_learnt_from_given_masks_segments_the_other_frames():
+    from engine.segmentation import colour_from_masks
+
+    scene = look_scene("saturated", 0, views=4, width=640, height=480)
+    images, truths = list(scene.images), list(scene.masks)
+    colour, model = colour_from_masks(images[:2], truths[:2])
+    assert model is not None and colour.has_hue
+    for image, truth in zip(images[2:], truths[2:]):
+        mask = segment_frame(image, colour, model=model).mask
+        assert (mask & truth).sum() / (mask | truth).sum() > 0.85
+    # masks of the table, not the cable, learn the table: the cable is not what they find
+    table = [~cv2.dilate(t.view(np.uint8), np.ones((15, 15), np.uint8)).astype(bool)
+             for t in truths[:2]]
+    colour, model = colour_from_masks(images[:2], table)
+    mask = segment_frame(images[2], colour, model=model).mask
+    assert (mask & truths[2]).sum() / (mask | truths[2]).sum() < 0.5
+    with pytest.raises(ValueError, match="2 frames but 1 masks"):
+        colour_from_masks(images[:2], truths[:1])
+    with pytest.raises(ValueError, match="no cable pixel"):
+        colour_from_masks(images[:1], [np.zeros_like(truths[0])])
+
+
+def test_the_looks_bench_s_oracle_seed_is_labelled_and_only_where_it_applies():
+    from dataclasses import replace
+
+    from engine.look_benchmark import _oracle_mean, score_sequence
+    from engine.segmentation import SegmentationSettings
+
+    scene = look_scene("saturated", 0, views=4, width=640, height=480)
+    images, truths = list(scene.images), list(scene.masks)
+    plain = score_sequence(images, truths)
+    assert plain["oracle"] is None
+    scored = score_sequence(images, truths, oracle=True)
+    assert len(scored["oracle"]) == len(images) and scored["iou"] == plain["iou"]
+    assert all(0.0 <= v <= 1.0 for v in scored["oracle"])
+    several = score_sequence(images, truths, replace(SegmentationSettings(), all_cables=True),
+                             oracle=True)
+    assert several["oracle"] is None
+    assert _oracle_mean([scored, scored]) == f"{np.mean(scored['oracle']):.3f}"
+    assert _oracle_mean([scored, several]).endswith(" (1)")
+    assert _oracle_mean([several]) == ""
