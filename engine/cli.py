@@ -174,6 +174,21 @@ def _family_options(args):
     return {**options, "real": None} if args.stage == "looks" else options
 
 
+def _topology_families(args):
+    """``bench topology``'s ``--families``: easy, hard or both."""
+    if args.families is None:
+        return {}
+    from .topology_benchmark import TOPOLOGY_FAMILIES
+
+    families = tuple(name.strip() for name in args.families.split(",") if name.strip())
+    unknown = [name for name in families if name not in TOPOLOGY_FAMILIES]
+    if unknown or not families:
+        raise InputError(f"unknown topology famil{'ies' if len(unknown) > 1 else 'y'} "
+                         f"{', '.join(unknown) or '(none given)'}: choose from "
+                         f"{', '.join(TOPOLOGY_FAMILIES)}")
+    return {"families": families}
+
+
 def _run_bench(args):
     from .benchmarks import bench_segment, format_table
 
@@ -213,6 +228,16 @@ def _run_bench(args):
         from .fault_benchmark import bench_faults
 
         rows = bench_faults(progress=None if args.quiet else ProgressBar())
+    elif args.stage == "topology":
+        from .topology_benchmark import SCENE_COLUMNS, SUMMARY_COLUMNS, bench_topology
+
+        summary, scenes = bench_topology(seeds=args.seeds, views=args.views,
+                                         progress=None if args.quiet else ProgressBar(),
+                                         **_topology_families(args))
+        print(format_table(summary, SUMMARY_COLUMNS))
+        print()
+        print(format_table(scenes, SCENE_COLUMNS))
+        return
     elif args.stage == "pipeline-looks":
         from .pipeline_benchmark import bench_pipeline_looks
 
@@ -292,15 +317,16 @@ def build_parser():
         "bench", parents=[quiet], help="measure a stage's accuracy and speed on ground-truth scenes",
         description="Print a table: one row per ground-truth scene.")
     bench.add_argument("stage", choices=["segment", "looks", "cameras", "carve", "rod",
-                                         "pipeline", "pipeline-looks", "faults", "preview",
-                                         "curve", "cancel", "memory"])
+                                         "pipeline", "pipeline-looks", "topology", "faults",
+                                         "preview", "curve", "cancel", "memory"])
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--seeds", type=int, default=3,
-                       help="scenes per look family and seed set (segment, looks, "
-                            "pipeline-looks)")
+                       help="scenes per family and seed set (looks, pipeline-looks, "
+                            "topology)")
     bench.add_argument("--families", metavar="NAMES",
-                       help="comma-separated look families (looks, pipeline-looks): those "
-                            "only, without the Cycles captures and real photos")
+                       help="comma-separated families: look families (looks, pipeline-looks: "
+                            "those only, without the Cycles captures and real photos) or "
+                            "easy, hard (topology)")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")
     bench.set_defaults(run=_run_bench)

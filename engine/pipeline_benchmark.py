@@ -45,9 +45,10 @@ def pipeline_suite(views=30):
     ]
 
 
-def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None):
+def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, details=False):
     """In a fresh process: reconstruct one capture (with ``masks`` if given, and ``settings``,
-    a :class:`.pipeline.PipelineSettings`, if given) and score it.
+    a :class:`.pipeline.PipelineSettings`, if given) and score it; with ``details``, the row
+    also holds ``checks``: ``(right, confidence)`` of each true crossing.
 
     The process may use at most :data:`MEMORY_LIMIT` bytes: a run past it is a row with its
     error, not a machine out of memory.
@@ -85,6 +86,9 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None):
            "masks_warned": "yes" if any(CHECK_HINT in w for w in result.warnings) else "no"}
     row.update({f"{stage}_s": result.timings.get(stage, 0.0) for stage in _STAGE_COLUMNS})
     row["total_s"] = total
+    if details:
+        row["checks"] = [(bool(check.right), check.confidence)
+                         for check in metrics.crossing_details]
     return row
 
 

@@ -9,7 +9,11 @@ same seed gives the same shape at every size. Four kinds:
 * :func:`knot_layout`: an overhand knot (three alternating crossings) with free tails;
 * :func:`hanging_layout`: a cable hanging in the air between two points, bent out of its
   plane: a 3D shape that no single image captures;
-* :func:`pair_layout`: two cables on a table crossing each other (and maybe themselves).
+* :func:`pair_layout`: two cables on a table crossing each other (and maybe themselves);
+* :func:`hard_layout`: a cable heaped on a table, as real cables on a desk lie: 12 to 20
+  crossings in clusters, some 3 r apart along the cable and in the plane, shallow ones down to
+  15°, tight loops, strands running side by side, an end lying near a crossing (the rules of
+  :data:`HARD_SETTINGS`); a strand may pass over one strand and under the next.
 
 Guarantees, checked on every layout before it is returned (else the next candidate is drawn):
 strands never closer than 2 r in 3D, and never closer than ``clearance`` in the table plane
@@ -27,8 +31,8 @@ from scipy.spatial import cKDTree
 
 from .ground_truth import GroundTruth, TrueCrossing
 
-__all__ = ["LayoutSettings", "table_layout", "knot_layout", "hanging_layout", "pair_layout",
-           "find_crossings_2d", "default_extent", "LayoutError"]
+__all__ = ["LayoutSettings", "HARD_SETTINGS", "table_layout", "knot_layout", "hanging_layout",
+           "pair_layout", "hard_layout", "find_crossings_2d", "default_extent", "LayoutError"]
 
 SAMPLE_SPACING = 0.25  # r: centreline samples
 MAX_CLOSED_CROSSINGS = 8
@@ -66,6 +70,12 @@ class LayoutSettings:
     lift_margin: float = 0.1
     min_bend_radius: float = 3.0
     max_tries: int = 3000
+
+
+#: The rules of :func:`hard_layout`: crossings down to 15°, 3 r apart along the cable (and
+#: from its ends), strands side by side with 0.2 r between them, bends down to 2 r.
+HARD_SETTINGS = LayoutSettings(min_crossing_angle=15.0, min_crossing_spacing=3.0,
+                               clearance=2.2, min_bend_radius=2.0, max_tries=400)
 
 
 # -- geometry helpers ---------------------------------------------------------------------------
@@ -155,6 +165,34 @@ def _lift(points, crossings, over_first, settings, closed):
     return np.column_stack([points[:, :2], 1.0 + height * (1.0 - ground)])
 
 
+def _stacked_lift(points, crossings, over_first, settings, rounds=12):
+    """Heights of an open cable whose crossings lie close together: each upper strand raised
+    until it clears the strand under it by ``2 (1 + lift_margin)`` there, however high that
+    one lies (it may pass over another strand nearby), by smooth bumps, in rounds until no
+    crossing needs more (or ``rounds`` run out: :func:`_check` then rejects the layout)."""
+    arc = np.arange(len(points)) * SAMPLE_SPACING
+    height = 2.0 * (1.0 + settings.lift_margin)
+    z = np.ones(len(points))
+    passes = []
+    for (arc_a, arc_b, angle), a_over in zip(crossings, over_first):
+        over, under = (arc_a, arc_b) if a_over else (arc_b, arc_a)
+        # wide enough to clear a shallow crossing's lower strand
+        passes.append((over, int(round(over / SAMPLE_SPACING)),
+                       int(round(under / SAMPLE_SPACING)),
+                       4.0 + 2.5 / math.sin(math.radians(max(angle, 1.0)))))
+    for _ in range(rounds):
+        raised = False
+        for over_arc, over, under, half_width in passes:
+            need = z[under] + height - z[over]
+            if need > 1e-6:
+                # a bump of height h bends by h pi^2 / (2 w^2) at most: 0.2 / r at w = 5 sqrt(h)
+                z += (need + 1e-3) * _bump(arc - over_arc, max(half_width, 5.0 * math.sqrt(need)))
+                raised = True
+        if not raised:
+            break
+    return np.column_stack([points[:, :2], z])
+
+
 def _arc_gap(a, b, length, closed):
     gap = np.abs(a - b)
     return np.minimum(gap, length - gap) if closed else gap
@@ -200,15 +238,7 @@ def _check(points, crossings, settings, closed):
         a, b = arc[pairs[:, 0]], arc[pairs[:, 1]]
         distinct = _arc_gap(a, b, length, closed) > 2 * settings.clearance
         a, b = a[distinct], b[distinct]
-        near_crossing = np.zeros(len(a), dtype=bool)
-        for arc_a, arc_b, angle in crossings:
-            window = 1.5 * settings.clearance / math.sin(math.radians(angle)) + 1.0
-            da = _arc_gap(a, arc_a, length, closed)
-            db = _arc_gap(b, arc_b, length, closed)
-            da2 = _arc_gap(a, arc_b, length, closed)
-            db2 = _arc_gap(b, arc_a, length, closed)
-            near_crossing |= ((da < window) & (db < window)) | ((da2 < window) & (db2 < window))
-        if not np.all(near_crossing):
+        if not np.all(_near_crossings(a, b, crossings, settings, length, closed)):
             return "clearance"
     return None
 
@@ -230,14 +260,14 @@ CORRELATION = 12.0   # r: how far along the cable the bending keeps its sense
 WIGGLE = 0.45        # how often the bending saturates into a loop
 
 
-def _bending(rng, count):
-    """Smooth random curvature along a walk, at most 1 / LOOP_RADIUS."""
+def _bending(rng, count, loop_radius=LOOP_RADIUS):
+    """Smooth random curvature along a walk, at most ``1 / loop_radius``."""
     noise = gaussian_filter1d(rng.normal(size=count), CORRELATION / SAMPLE_SPACING, mode="wrap")
     noise /= noise.std() + 1e-12
-    return np.clip(WIGGLE * noise, -1.0, 1.0) / LOOP_RADIUS
+    return np.clip(WIGGLE * noise, -1.0, 1.0) / loop_radius
 
 
-def _confined_walk(rng, length, bound):
+def _confined_walk(rng, length, bound, loop_radius=LOOP_RADIUS):
     """An open cable dropped in a disk of radius ``bound``: smooth bends, loops, no kinks.
 
     Heading integrates a random curvature. At the rim the walk turns back inwards as tightly
@@ -245,7 +275,7 @@ def _confined_walk(rng, length, bound):
     rather than creeping along the rim (which would lay strands side by side).
     """
     count = int(length / SAMPLE_SPACING)
-    kappa = _bending(rng, count)
+    kappa = _bending(rng, count, loop_radius)
     straight_run = int(bound / SAMPLE_SPACING)
     x = y = 0.0
     heading = float(rng.uniform(0.0, 2.0 * np.pi))
@@ -263,7 +293,7 @@ def _confined_walk(rng, length, bound):
             if inwards < 0.7:  # turn until heading well inwards
                 if not turning:
                     side = x * sin_h - y * cos_h
-                    turning = math.copysign(1.0 / LOOP_RADIUS, side if side else 1.0)
+                    turning = math.copysign(1.0 / loop_radius, side if side else 1.0)
                 k = turning
             elif turning:
                 turning = 0.0
@@ -468,6 +498,131 @@ def pair_layout(crossings=3, *, seed=0, radius=0.004, extent=None, gap=24.0,
             return GroundTruth(truth.centreline[keep], radius, found, kind="pair",
                                breaks=(cut - half,))
     raise LayoutError(f"no pair layout with {crossings} crossings (seed {seed})")
+
+
+def _near_crossings(arc_a, arc_b, crossings, settings, length=None, closed=False):
+    """Per pair of arc positions: whether both lie within a crossing's window (where strands
+    are close in the plane because they cross; :func:`_check` spares the same windows)."""
+    near = np.zeros(len(arc_a), dtype=bool)
+    length = 0.0 if length is None else length
+    for cross_a, cross_b, angle in crossings:
+        window = 1.5 * settings.clearance / math.sin(math.radians(angle)) + 1.0
+        da, db = _arc_gap(arc_a, cross_a, length, closed), _arc_gap(arc_b, cross_b, length, closed)
+        da2, db2 = (_arc_gap(arc_a, cross_b, length, closed),
+                    _arc_gap(arc_b, cross_a, length, closed))
+        near |= ((da < window) & (db < window)) | ((da2 < window) & (db2 < window))
+    return near
+
+
+def _pushed_apart(flat, crossings, settings, rounds=40):
+    """An open walk whose strands lie closer than ``clearance`` in the plane without crossing
+    there pushed apart until they clear it (a heaped cable lies in contact, it does not
+    overlap): each close pair moves apart along the line between them, the moves spread
+    smoothly along the cable. The crossings stay where they are unless a push undoes one
+    (the caller counts them again)."""
+    points = np.array(flat, dtype=np.float64)
+    arc = np.arange(len(points)) * SAMPLE_SPACING
+    wanted = 1.02 * settings.clearance
+    for _ in range(rounds):
+        pairs = cKDTree(points).query_pairs(wanted, output_type="ndarray")
+        if len(pairs):
+            a, b = arc[pairs[:, 0]], arc[pairs[:, 1]]
+            keep = (np.abs(a - b) > 2 * settings.clearance) \
+                & ~_near_crossings(a, b, crossings, settings)
+            pairs = pairs[keep]
+        if not len(pairs):
+            break
+        offset = points[pairs[:, 0]] - points[pairs[:, 1]]
+        distance = np.maximum(np.linalg.norm(offset, axis=1, keepdims=True), 1e-9)
+        push = 0.5 * (wanted - distance) * offset / distance
+        move = np.zeros_like(points)
+        np.add.at(move, pairs[:, 0], push)
+        np.add.at(move, pairs[:, 1], -push)
+        count = np.bincount(pairs.ravel(), minlength=len(points))  # a sample's close pairs
+        move /= np.maximum(count, 1)[:, None]
+        # spread along the cable (a radius or so), keeping the bends smooth; the spread
+        # pushes weaker, so the rounds repeat it
+        points += gaussian_filter1d(move, 1.0 / SAMPLE_SPACING, axis=0, mode="nearest")
+        points = _unkinked(points, 0.9 / settings.min_bend_radius)
+    return _arc_resample(points, SAMPLE_SPACING)
+
+
+def _unkinked(points, limit, rounds=20):
+    """An open polyline whose samples bending more than ``limit`` (1 / r) are moved towards
+    their neighbours' midpoint, in rounds, until none does."""
+    points = points.copy()
+    for _ in range(rounds):
+        middle = 0.5 * (points[:-2] + points[2:])
+        curvature = 2.0 * np.linalg.norm(middle - points[1:-1], axis=1) / SAMPLE_SPACING ** 2
+        sharp = np.flatnonzero(curvature > limit)
+        if not len(sharp):
+            break
+        points[sharp + 1] += 0.5 * (middle[sharp] - points[sharp + 1])
+    return points
+
+
+def hard_layout(*, seed=0, radius=0.004, extent=None, crossings=(12, 20),
+                settings=HARD_SETTINGS):
+    """A cable heaped on a table: many crossings close together, as on a real desk.
+
+    A walk dropped in a small disk (tight loops allowed) is cut to its longest stretch holding
+    as many crossings as allowed, none flatter than the rules allow; strands that come closer
+    than the clearance without crossing are pushed apart (:func:`_pushed_apart`), and the
+    strands are lifted over each other however they stack (:func:`_stacked_lift`): a strand
+    may pass over one strand and under the next 3 r on.
+
+    Parameters
+    ----------
+    seed : int, optional
+    radius : float, optional
+        Metres.
+    extent : float, optional
+        Diameter of the heap's disk, metres; ``radius * (60 + 2.5 * most)`` if None, where
+        ``most`` is the largest number of crossings allowed.
+    crossings : int or (int, int), optional
+        The number of crossings, or its range (8 to 24).
+    settings : LayoutSettings, optional
+
+    Returns
+    -------
+    GroundTruth
+        ``kind="hard"``.
+
+    Raises
+    ------
+    LayoutError
+        No layout found within ``settings.max_tries`` walks.
+    """
+    fewest, most = (crossings, crossings) if np.ndim(crossings) == 0 else crossings
+    if not 8 <= fewest <= most <= 24:
+        raise ValueError("crossings must lie between 8 and 24")
+    rng = np.random.default_rng([seed, fewest, most, 41])
+    extent = radius * (60.0 + 2.5 * most) if extent is None else float(extent)
+    _check_extent(extent, radius)
+    bound = 0.5 * extent / radius - settings.clearance
+    length = 4.0 * bound + 12.0 * most
+    for _ in range(settings.max_tries):
+        walk = _confined_walk(rng, length, bound, loop_radius=3.2)
+        found = find_crossings_2d(walk)
+        window = next((w for w in (_window_with_crossings(found, wanted, len(walk),
+                                                          2.0 * bound, settings)
+                                   for wanted in range(most, fewest - 1, -1))
+                       if w is not None), None)
+        if window is None:
+            length = min(1.05 * length, 40.0 * bound)
+            continue
+        flat = walk[window[0]:window[1] + 1]
+        before = len(find_crossings_2d(flat))
+        flat = _pushed_apart(flat, find_crossings_2d(flat), settings)
+        found = find_crossings_2d(flat)
+        if len(found) != before:
+            continue
+        over_first = rng.random(len(found)) < 0.5
+        lifted = _stacked_lift(flat, found, over_first, settings)
+        if _check(lifted, found, settings, False) is None:
+            return _finish(lifted, found, over_first, radius, False, "hard")
+    raise LayoutError(f"no hard layout with {fewest} to {most} crossings after "
+                      f"{settings.max_tries} tries (seed {seed})")
 
 
 def _tail(rng, start, direction, length, turn):

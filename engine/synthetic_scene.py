@@ -23,12 +23,14 @@ import numpy as np
 from .colmap_model import write_colmap_model
 from .ground_truth import write_ground_truth
 from .synthetic_cameras import cable_pixel_width, handheld_cameras, orbit_cameras
-from .synthetic_layouts import hanging_layout, knot_layout, pair_layout, table_layout
+from .synthetic_layouts import (hanging_layout, hard_layout, knot_layout, pair_layout,
+                                table_layout)
 from .synthetic_looks import DEFAULT_LOOK, SEVERAL_CABLES, ClutterObject, Look, sample_look
 from .synthetic_render import render_views
 
 __all__ = ["SceneSpec", "SyntheticScene", "make_scene", "write_scene", "look_spec", "look_scene",
-           "lift_truth", "read_look", "render_scene_to", "MIN_CABLE_PIXELS"]
+           "lift_truth", "read_look", "render_scene_to", "hard_spec", "HARD_FRAMING",
+           "MIN_CABLE_PIXELS"]
 
 #: Nothing can be reconstructed from a thinner wire; scenes are always at least this wide.
 MIN_CABLE_PIXELS = 5.0
@@ -41,10 +43,11 @@ class SceneSpec:
     Attributes
     ----------
     kind : str
-        ``"table"``, ``"loop"`` (a closed cable on the table), ``"knot"``, ``"hanging"`` or
-        ``"pair"`` (two cables crossing each other).
+        ``"table"``, ``"loop"`` (a closed cable on the table), ``"knot"``, ``"hanging"``,
+        ``"pair"`` (two cables crossing each other) or ``"hard"`` (a heap: 12 to 20
+        crossings close together, :func:`.synthetic_layouts.hard_layout`).
     crossings : int
-        For ``"table"`` and ``"loop"``.
+        For ``"table"``, ``"loop"`` and ``"pair"``.
     seed : int
     radius : float
         Metres.
@@ -53,6 +56,11 @@ class SceneSpec:
     views : int
     rig : str
         ``"orbit"`` or ``"handheld"``.
+    framing : float
+        The share of the cable's extent a view frames (:func:`.synthetic_cameras.orbit_cameras`):
+        1 shows the whole cable in every view; under 1 the cameras come closer and aim around
+        it, so each part of the cable is out of some frames
+        (:func:`.synthetic_cameras.out_of_frame`).
     width, height : int
         Image size.
     image_format : str or None
@@ -69,6 +77,7 @@ class SceneSpec:
     extent: float = None
     views: int = 30
     rig: str = "orbit"
+    framing: float = 1.0
     width: int = 960
     height: int = 720
     image_format: str = None
@@ -100,6 +109,8 @@ class SceneSpec:
             return hanging_layout(**common)
         if self.kind == "pair":
             return pair_layout(self.crossings, **common)
+        if self.kind == "hard":
+            return hard_layout(**common)
         raise ValueError(f"unknown scene kind {self.kind!r}")
 
 
@@ -168,12 +179,30 @@ def _framed_truth(spec):
     low_views = (30.0, 60.0) if spec.kind == "hanging" else (45.0, 75.0)
     cameras = rig(truth, views=spec.views, width=spec.width, height=spec.height,
                   elevations=low_views, name_format="{:03d}." + spec.file_format,
-                  seed=spec.seed)
+                  seed=spec.seed, framing=spec.framing)
     width = cable_pixel_width(truth, cameras)
     if width < MIN_CABLE_PIXELS:
         raise ValueError(f"the cable would be only {width:.1f} pixels wide: use a larger "
                          "radius, a smaller extent or larger images")
     return truth.with_cameras(cameras)
+
+
+#: How much of a hard scene each view frames (:attr:`SceneSpec.framing`): on the hard
+#: layouts a centreline point is out of 20–28% of 30 orbit views on average, an end out of
+#: 19–32% (:func:`.synthetic_cameras.out_of_frame`, seeds 0–2).
+HARD_FRAMING = 0.6
+
+
+def hard_spec(seed, *, views=30, width=960, height=720, framing=HARD_FRAMING, **fields):
+    """The hard scene of ``seed``: a heap (:func:`.synthetic_layouts.hard_layout`) in the
+    default look, seen by views that each frame part of it (``framing``).
+
+    Returns
+    -------
+    SceneSpec
+    """
+    return SceneSpec(kind="hard", seed=seed, views=views, width=width, height=height,
+                     framing=framing, **fields)
 
 
 def look_spec(family, seed, *, kind=None, crossings=3, views=24, width=640, height=480,

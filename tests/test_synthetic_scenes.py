@@ -12,11 +12,13 @@ from engine import read_colmap_model
 from engine.ground_truth import read_ground_truth
 from engine.metrics import evaluate
 from engine.result import CablePath, Result
-from engine.synthetic_cameras import cable_pixel_width, handheld_cameras, orbit_cameras
-from engine.synthetic_layouts import (LayoutSettings, find_crossings_2d, hanging_layout,
-                                      knot_layout, table_layout)
+from engine.synthetic_cameras import (cable_pixel_width, handheld_cameras, orbit_cameras,
+                                      out_of_frame)
+from engine.synthetic_layouts import (HARD_SETTINGS, LayoutSettings, find_crossings_2d,
+                                      hanging_layout, hard_layout, knot_layout, table_layout)
 from engine.synthetic_render import render_masks
-from engine.synthetic_scene import SceneSpec, make_scene, render_scene_to, write_scene
+from engine.synthetic_scene import (HARD_FRAMING, SceneSpec, hard_spec, make_scene,
+                                    render_scene_to, write_scene)
 
 RULES = LayoutSettings()
 
@@ -32,7 +34,7 @@ def strand_pairs(truth, distance):
     return pairs[gap > 2.5] if len(pairs) else pairs
 
 
-def assert_layout_rules(truth, *, knot=False):
+def assert_layout_rules(truth, *, knot=False, rules=RULES):
     r = truth.radius
     points = truth.centreline / r
     # Strands never closer than 2 r in 3D.
@@ -41,7 +43,7 @@ def assert_layout_rules(truth, *, knot=False):
     found = find_crossings_2d(points, closed=truth.closed)
     assert len(found) == len(truth.crossings)
     for crossing in truth.crossings:
-        assert crossing.angle >= RULES.min_crossing_angle
+        assert crossing.angle >= rules.min_crossing_angle
         over, under = points[crossing.over], points[crossing.under]
         assert np.linalg.norm(over[:2] - under[:2]) < 0.5  # same place on the table
         assert over[2] - under[2] >= 2.0  # the upper strand is lifted over the lower one
@@ -49,14 +51,14 @@ def assert_layout_rules(truth, *, knot=False):
     arc = truth.arc_length / r
     passes = np.sort([arc[i] for c in truth.crossings for i in (c.over, c.under)])
     if len(passes) > 1:
-        assert np.diff(passes).min() >= (4.0 if knot else RULES.min_crossing_spacing) - 0.5
+        assert np.diff(passes).min() >= (4.0 if knot else rules.min_crossing_spacing) - 0.5
     if len(passes) and not truth.closed:
-        assert passes[0] >= RULES.min_crossing_spacing - 0.5
-        assert arc[-1] - passes[-1] >= RULES.min_crossing_spacing - 0.5
+        assert passes[0] >= rules.min_crossing_spacing - 0.5
+        assert arc[-1] - passes[-1] >= rules.min_crossing_spacing - 0.5
     # Bends no tighter than the rule.
     ds = np.linalg.norm(np.diff(points, axis=0), axis=1).mean()
     bend = np.linalg.norm(points[:-2] + points[2:] - 2 * points[1:-1], axis=1) / ds ** 2
-    assert bend.max() <= 1.0 / RULES.min_bend_radius + 0.02
+    assert bend.max() <= 1.0 / rules.min_bend_radius + 0.02
     # Lying on the table: never below it.
     assert points[:, 2].min() >= 1.0 - 1e-9
 
@@ -75,6 +77,89 @@ def test_closed_loops(crossings):
         truth = table_layout(crossings, seed=seed, closed=True)
         assert truth.closed
         assert_layout_rules(truth)
+
+
+def test_hard_layouts_are_heaps_within_their_own_rules():
+    shallow = close = 0
+    for seed in range(4):
+        truth = hard_layout(seed=seed)
+        assert truth.kind == "hard" and 12 <= len(truth.crossings) <= 20
+        assert_layout_rules(truth, rules=HARD_SETTINGS)
+        arc = truth.arc_length / truth.radius
+        passes = np.sort([arc[i] for c in truth.crossings for i in (c.over, c.under)])
+        close += np.diff(passes).min() < RULES.min_crossing_spacing
+        shallow += min(c.angle for c in truth.crossings) < RULES.min_crossing_angle
+        # strands in contact without crossing: closer in the plane than the easy clearance
+        flat = truth.centreline[:, :2] / truth.radius
+        pairs = cKDTree(flat).query_pairs(RULES.clearance, output_type="ndarray")
+        assert len(pairs) > 0
+    # what the easy rules forbid happens on most of them
+    assert close >= 3 and shallow >= 1
+    again = hard_layout(seed=1)
+    assert np.array_equal(again.centreline, hard_layout(seed=1).centreline)
+    assert not np.array_equal(again.centreline, hard_layout(seed=2).centreline)
+    exact = hard_layout(seed=0, crossings=14)
+    assert len(exact.crossings) == 14
+    with pytest.raises(ValueError, match="between 8 and 24"):
+        hard_layout(crossings=(5, 30))
+
+
+def test_a_strand_passes_over_one_and_under_the_next_close_by():
+    from engine.synthetic_layouts import SAMPLE_SPACING, _arc_resample, _stacked_lift
+
+    # two strands 3 r apart (x = -1.5 up, x = 1.5 down), then along y = 0 back across both:
+    # the last stretch passes over the strand at x = 1.5 and under the one at x = -1.5, so
+    # that one is lifted over the last stretch's raised part
+    corners = np.array([[-1.5, -40], [-1.5, 40], [1.5, 40], [1.5, -40], [60, -40], [60, 0],
+                        [-40, 0]], dtype=float)
+    points = _arc_resample(corners, SAMPLE_SPACING)
+    found = find_crossings_2d(points)
+    assert len(found) == 2
+    # the first pass of each crossing is the vertical strand's, the second the last stretch's
+    at = [points[int(round(c[0] / SAMPLE_SPACING)), 0] for c in found]
+    over_first = [x < 0 for x in at]  # over at x = -1.5, under at x = 1.5
+    lifted = _stacked_lift(points, found, over_first, HARD_SETTINGS)
+    height = 2.0 * (1.0 + HARD_SETTINGS.lift_margin)
+    for (a, b, _), first_over in zip(found, over_first):
+        za, zb = (lifted[int(round(x / SAMPLE_SPACING)), 2] for x in (a, b))
+        assert (za - zb if first_over else zb - za) >= height - 1e-6
+    # stacked: the strand at x = -1.5 clears the last stretch, itself raised over x = 1.5
+    # (a plain lift over the table, as _lift does, would leave it at 1 + height)
+    assert lifted[:, 2].min() >= 1.0 - 1e-9 and lifted[:, 2].max() > 1.0 + height + 1.0
+
+
+def test_strands_closer_than_the_clearance_are_pushed_apart():
+    from engine.synthetic_layouts import SAMPLE_SPACING, _arc_resample, _pushed_apart
+
+    # a hairpin whose two legs lie 1 r apart: pushed to the clearance, no crossing made
+    corners = np.array([[0, -0.5], [40, -0.5], [40, 0.5], [0, 0.5]], dtype=float)
+    points = _arc_resample(corners, SAMPLE_SPACING)
+    pushed = _pushed_apart(points, [], HARD_SETTINGS)
+    legs = pushed[pushed[:, 0] < 30]
+    gap = legs[legs[:, 1] > 0, 1].min() - legs[legs[:, 1] < 0, 1].max()
+    assert HARD_SETTINGS.clearance <= gap <= 1.1 * HARD_SETTINGS.clearance
+    assert find_crossings_2d(pushed) == []
+    steps = np.linalg.norm(np.diff(pushed, axis=0), axis=1)
+    assert np.allclose(steps, SAMPLE_SPACING, rtol=0.05)
+
+
+def test_views_that_frame_part_of_the_cable():
+    truth = hard_layout(seed=0)
+    whole = orbit_cameras(truth, views=30)
+    assert out_of_frame(truth, whole).max() == 0.0
+    part = out_of_frame(truth, orbit_cameras(truth, views=30, framing=HARD_FRAMING))
+    assert 0.15 <= part.mean() <= 0.45 and part.max() < 0.8
+    ends = np.r_[part[:len(part) // 20], part[-len(part) // 20:]]
+    assert ends.mean() >= 0.1
+    held = out_of_frame(truth, handheld_cameras(truth, views=30, framing=HARD_FRAMING))
+    assert held.mean() > 0.1
+    with pytest.raises(ValueError, match="framing"):
+        orbit_cameras(truth, framing=0.1)
+    spec = hard_spec(3, views=10, width=640, height=480)
+    assert spec.kind == "hard" and spec.framing == HARD_FRAMING
+    scene = make_scene(spec)
+    # the exact masks leave out what is out of frame: some view misses part of the cable
+    assert min(mask.sum() for mask in scene.masks) < 0.8 * max(mask.sum() for mask in scene.masks)
 
 
 def test_knots_alternate_over_and_under():

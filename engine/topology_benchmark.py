@@ -1,0 +1,148 @@
+"""``python -m engine bench topology``: the easy layouts beside the hard ones, several seeds.
+
+Two families of scenes (30 views at 960x720, the default look, true cameras):
+
+* **easy**: a cable on a table with 3 to 8 crossings (by the seed) far apart, as the other
+  benches' scenes (:func:`.synthetic_layouts.table_layout`, every view framing the cable);
+* **hard**: a heap of 12 to 20 crossings, some 3 r apart, shallow ones down to 15°, tight
+  loops, strands side by side (:func:`.synthetic_layouts.hard_layout`), seen by views that
+  each frame only part of it (:data:`.synthetic_scene.HARD_FRAMING`).
+
+Each family runs on tuning seeds and on held-out seeds (:data:`.synthetic_looks.TUNING_SEEDS`,
+:data:`.synthetic_looks.HELD_OUT_SEEDS`; tune on the first only), each scene reconstructed in
+a fresh process twice: with the **exact** masks (labelled *oracle*: they are the truth) and
+with **ours**, segmented as a user's run does. A row sums up a family, seed set and masks:
+scenes with one path per cable and every crossing right, crossings right over all scenes,
+accuracy (mean and worst of the scenes' means and 95th percentiles, in r), the crossings
+listed with a confidence of at least 0.9 and how many of those are right, wrong crossings
+not listed as doubtful (no confidence under 0.9), and the topology stage's slowest time.
+"""
+
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .benchmarks import in_fresh_process
+from .pipeline_benchmark import scored_run
+from .synthetic_looks import HELD_OUT_SEEDS, TUNING_SEEDS
+from .synthetic_scene import SceneSpec, hard_spec, make_scene, write_scene
+
+__all__ = ["TOPOLOGY_FAMILIES", "SUMMARY_COLUMNS", "SCENE_COLUMNS", "topology_spec",
+           "bench_topology"]
+
+#: The scene families, easy first.
+TOPOLOGY_FAMILIES = ("easy", "hard")
+
+_MASKS = (("oracle: exact", True), ("ours", False))
+
+#: The columns of the two tables :func:`bench_topology` returns.
+SUMMARY_COLUMNS = ("family", "set", "masks", "scenes", "all_right", "crossings",
+                   "accuracy_mean", "accuracy_worst", "p95_mean", "p95_worst", "completeness",
+                   "confident_right", "wrong_undoubted", "topology_s_max", "total_s_mean",
+                   "errors")
+SCENE_COLUMNS = ("family", "set", "seed", "masks", "true_crossings", "accuracy_mean",
+                 "accuracy_p95", "completeness", "crossings", "one_path", "confident_right",
+                 "masks_warned", "topology_s", "total_s", "error")
+
+
+def topology_spec(family, seed, *, views=30):
+    """The scene of ``family`` (:data:`TOPOLOGY_FAMILIES`) and ``seed``.
+
+    Returns
+    -------
+    SceneSpec
+    """
+    if family == "easy":
+        return SceneSpec(kind="table", crossings=3 + seed % 6, seed=seed, views=views,
+                         width=960, height=720, image_format="jpg")
+    if family == "hard":
+        return hard_spec(seed, views=views, image_format="jpg")
+    raise ValueError(f"unknown topology family {family!r}: choose from "
+                     f"{', '.join(TOPOLOGY_FAMILIES)}")
+
+
+def _summary(family, split, masks, rows):
+    """One row of the summary table from the scenes' rows."""
+    done = [row for row in rows if "error" not in row]
+    summary = {"family": family, "set": split, "masks": masks, "scenes": len(rows),
+               "errors": len(rows) - len(done)}
+    if not done:
+        return summary
+    checks = [check for row in done for check in row["checks"]]
+    right_scenes = sum(row["one_path"] == "yes" and all(right for right, _ in row["checks"])
+                       for row in done)
+    confident = [right for right, confidence in checks
+                 if confidence is not None and confidence >= 0.9]
+    means = [row["accuracy_mean"] for row in done]
+    p95 = [row["accuracy_p95"] for row in done]
+    summary.update({
+        "all_right": f"{right_scenes}/{len(rows)}",
+        "crossings": f"{sum(right for right, _ in checks)}/{len(checks)}",
+        "accuracy_mean": float(np.mean(means)), "accuracy_worst": float(np.max(means)),
+        "p95_mean": float(np.mean(p95)), "p95_worst": float(np.max(p95)),
+        "completeness": float(np.mean([row["completeness"] for row in done])),
+        "confident_right": f"{sum(confident)}/{len(confident)}",
+        "wrong_undoubted": sum(not right and (confidence is None or confidence >= 0.9)
+                               for right, confidence in checks),
+        "topology_s_max": float(np.max([row["topology_s"] for row in done])),
+        "total_s_mean": float(np.mean([row["total_s"] for row in done]))})
+    return summary
+
+
+def bench_topology(*, seeds=3, views=30, families=TOPOLOGY_FAMILIES, progress=None):
+    """Reconstruct each family's tuning and held-out scenes with the exact masks and ours.
+
+    Parameters
+    ----------
+    seeds : int, optional
+        Scenes per family and seed set.
+    views : int, optional
+    families : sequence of str, optional
+        Of :data:`TOPOLOGY_FAMILIES`.
+    progress : callable, optional
+        ``progress(fraction, message)``.
+
+    Returns
+    -------
+    summary : list of dict
+        One row per family, seed set and masks (see the module notes).
+    scenes : list of dict
+        One row per scene and masks.
+    """
+    for family in families:
+        topology_spec(family, 0, views=views)  # an unknown family fails before any work
+    jobs = [(family, split, seed) for family in families
+            for split, pool in (("tuning", TUNING_SEEDS), ("held-out", HELD_OUT_SEEDS))
+            for seed in pool[:seeds]]
+    scenes, summary = [], []
+    with tempfile.TemporaryDirectory(prefix="bench_topology_") as work:
+        for number, (family, split, seed) in enumerate(jobs):
+            if progress is not None:
+                progress(number / len(jobs), f"{family} {split} {seed}")
+            folder = Path(work) / f"{family}-{seed}"
+            try:
+                scene = make_scene(topology_spec(family, seed, views=views))
+            except Exception as error:  # a layout that cannot be drawn is a row, not a stop
+                for label, _ in _MASKS:
+                    scenes.append({"family": family, "set": split, "seed": seed,
+                                   "masks": label, "error": f"scene: {error}"[:80]})
+                continue
+            write_scene(scene, folder)
+            for label, exact in _MASKS:
+                row = {"family": family, "set": split, "seed": seed, "masks": label,
+                       "true_crossings": len(scene.truth.crossings)}
+                row.update(in_fresh_process(
+                    scored_run, str(folder), str(folder / "ground_truth.json"), True,
+                    str(folder / "masks") if exact else None, None, True))
+                scenes.append(row)
+    for family in families:
+        for split in ("tuning", "held-out"):
+            for label, _ in _MASKS:
+                summary.append(_summary(family, split, label, [
+                    row for row in scenes if (row["family"], row["set"], row["masks"])
+                    == (family, split, label)]))
+    if progress is not None:
+        progress(1.0, "done")
+    return summary, [{key: value for key, value in row.items() if key != "checks"}
+                     for row in scenes]
