@@ -147,6 +147,10 @@ class TopologySettings:
     edge_floor : float
         Cost of every pixel: paths are short as well as smooth, and a view of noise scores near
         zero.
+    path_radius : float
+        The paths are found where the cable's radius is at most this many pixels: a view that
+        shows it larger is reduced around the junction first (the cost of the paths grows
+        with the square of the patch's side; the edges they weigh are as clear).
     spur_length : float
         At a junction with an odd number of branches or more than four, a branch to a free end
         shorter than this may be a spur of carving noise (or a stub of cable): it may stay
@@ -195,6 +199,7 @@ class TopologySettings:
     highlight_clip: float = 0.8
     edge_scale: float = 10.0
     edge_floor: float = 1.0
+    path_radius: float = 3.0
     spur_length: float = 15.0
     unpaired_cost: float = 4.0
     gap_length: float = 10.0
@@ -209,7 +214,7 @@ class TopologySettings:
     def __post_init__(self):
         for name in ("anchor_distance", "max_anchor_distance", "height_window", "bend_scale",
                      "height_scale", "image_gain", "image_spread", "highlight_search",
-                     "edge_scale", "bridge_distance", "lift_width"):
+                     "edge_scale", "path_radius", "bridge_distance", "lift_width"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"TopologySettings.{name} must be positive")
         for name in ("anchor_margin", "vertical_weight", "height_cap", "image_prior_views",
@@ -1041,9 +1046,18 @@ def _path_costs(image, mask, anchors, r_px, settings):
     if x1 - x0 < 3 or y1 - y0 < 3:
         return None
     patch = np.asarray(image[y0:y1, x0:x1], dtype=np.float32)
+    cable = np.asarray(mask[y0:y1, x0:x1], dtype=bool)
+    anchors = np.asarray(anchors, dtype=float) - [x0, y0]  # COLMAP coordinates in the patch
+    if r_px > settings.path_radius:  # reduced: the cable's radius path_radius pixels
+        scale = settings.path_radius / r_px
+        size = (max(int(round((x1 - x0) * scale)), 3), max(int(round((y1 - y0) * scale)), 3))
+        patch = cv2.resize(patch, size, interpolation=cv2.INTER_AREA)
+        cable = cv2.resize(cable.view(np.uint8) * np.float32(1.0), size,
+                           interpolation=cv2.INTER_AREA) >= 0.5
+        anchors = anchors * [size[0] / (x1 - x0), size[1] / (y1 - y0)]
+        r_px = settings.path_radius
     if patch.ndim == 2:
         patch = patch[..., None]
-    cable = np.asarray(mask[y0:y1, x0:x1], dtype=bool)
     if not cable.any():
         return None
     smooth = cv2.GaussianBlur(patch, (0, 0), 0.7)
@@ -1065,7 +1079,7 @@ def _path_costs(image, mask, anchors, r_px, settings):
     search = max(settings.highlight_search * r_px, 1.5)
     rows, cols = np.indices(cable.shape)
     for k, (x, y) in enumerate(anchors):
-        col, row = x - 0.5 - x0, y - 0.5 - y0
+        col, row = x - 0.5, y - 0.5
         for reach in (search, 2.0 * search):
             near = ((rows - row) ** 2 + (cols - col) ** 2 <= reach ** 2) & cable
             if near.any():

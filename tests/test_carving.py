@@ -182,3 +182,24 @@ def test_a_packed_mask_gives_back_the_mask_in_an_eighth_of_the_memory():
     np.testing.assert_array_equal(packed(), mask)
     with pytest.raises(ValueError, match="2-D"):
         PackedMask(np.zeros((2, 2, 2), bool))
+
+
+def test_a_stretch_out_of_most_frames_is_carved_from_the_views_that_frame_it():
+    from engine.synthetic_cameras import out_of_frame
+
+    scene = make_scene(SceneSpec(crossings=2, seed=4, views=16, width=640, height=480,
+                                 framing=0.5))
+    truth = scene.truth
+    outside = out_of_frame(truth, scene.cameras)
+    rarely = outside > 0.5  # seen by fewer than half the views
+    assert rarely.mean() > 0.05
+    grid = carve(scene.cameras, list(scene.masks))
+    distance, _ = cKDTree(grid.occupied_points()).query(truth.centreline)
+    held = distance <= truth.radius
+    assert held[rarely].mean() > 0.9
+    # a view that does not frame a voxel is no vote against it: asking every voxel to be
+    # framed by half the views loses those stretches
+    strict = carve(scene.cameras, list(scene.masks),
+                   settings=replace(CarvingSettings(), min_view_fraction=0.5))
+    distance, _ = cKDTree(strict.occupied_points()).query(truth.centreline)
+    assert (distance <= truth.radius)[rarely].mean() < 0.5

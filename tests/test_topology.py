@@ -324,6 +324,26 @@ def test_the_image_cue_alone_decides_and_follows_the_drawing(over_angle, under_a
     assert lazy.crossings[0].confidence == pytest.approx(crossing.confidence)
 
 
+def test_a_large_view_is_read_reduced_and_says_the_same():
+    from engine.topology import TopologySettings
+
+    camera = look_at_camera("top.png", [0.0, 0.0, 40.0], [0.0, 0.0, 0.0], width=400, height=400,
+                            params=[800.0, 800.0, 200.0, 200.0])
+    image, mask = drawn_crossing(camera, 20, 110, R)
+    graph = crossing_graph([20, 110, 200, 290], [0.0] * 4)
+    views = [TopologyView(camera, image, mask)]
+    reduced = resolve_topology(graph, views, radius=R, up=UP)  # the cable's radius is 20 px
+    full = resolve_topology(graph, views, radius=R, up=UP,
+                            settings=TopologySettings(path_radius=100.0))
+    for topology in (reduced, full):
+        crossing = topology.crossings[0]
+        assert far_ends(topology.paths[crossing.over[0]]) == {end_of(20), end_of(200)}
+    score_reduced, score_full = (t.crossings[0].views[0][2] for t in (reduced, full))
+    assert score_reduced > 0.2 and score_full > 0.2
+    with pytest.raises(ValueError, match="path_radius"):
+        TopologySettings(path_radius=0.0)
+
+
 # -- ground-truth scenes ------------------------------------------------------------------------
 
 SCENES = {
