@@ -157,6 +157,17 @@ def _run_reconstruct(args):
              points, len(result.crossings), result.radius, result.units, output)
 
 
+def _chosen_families(args, known, kind):
+    """The families ``--families`` names, each one of ``known`` (an InputError otherwise)."""
+    families = tuple(name.strip() for name in args.families.split(",") if name.strip())
+    unknown = [name for name in families if name not in known]
+    if unknown or not families:
+        raise InputError(f"unknown {kind} famil{'ies' if len(unknown) > 1 else 'y'} "
+                         f"{', '.join(unknown) or '(none given)'}: choose from "
+                         f"{', '.join(known)}")
+    return families
+
+
 def _family_options(args):
     """``bench looks`` / ``pipeline-looks`` options of ``--families``: those families only,
     without the captures and real photos."""
@@ -164,13 +175,7 @@ def _family_options(args):
         return {}
     from .synthetic_looks import LOOK_FAMILIES
 
-    families = tuple(name.strip() for name in args.families.split(",") if name.strip())
-    unknown = [name for name in families if name not in LOOK_FAMILIES]
-    if unknown or not families:
-        raise InputError(f"unknown look famil{'ies' if len(unknown) > 1 else 'y'} "
-                         f"{', '.join(unknown) or '(none given)'}: choose from "
-                         f"{', '.join(LOOK_FAMILIES)}")
-    options = {"families": families, "captures": None}
+    options = {"families": _chosen_families(args, LOOK_FAMILIES, "look"), "captures": None}
     return {**options, "real": None} if args.stage == "looks" else options
 
 
@@ -180,13 +185,7 @@ def _topology_families(args):
         return {}
     from .topology_benchmark import TOPOLOGY_FAMILIES
 
-    families = tuple(name.strip() for name in args.families.split(",") if name.strip())
-    unknown = [name for name in families if name not in TOPOLOGY_FAMILIES]
-    if unknown or not families:
-        raise InputError(f"unknown topology famil{'ies' if len(unknown) > 1 else 'y'} "
-                         f"{', '.join(unknown) or '(none given)'}: choose from "
-                         f"{', '.join(TOPOLOGY_FAMILIES)}")
-    return {"families": families}
+    return {"families": _chosen_families(args, TOPOLOGY_FAMILIES, "topology")}
 
 
 def _run_bench(args):

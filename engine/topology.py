@@ -59,9 +59,11 @@ several paths (several cables).
 Imperfect graphs: a short branch to a free end at a junction with an odd number of branches (or
 more than four) may be a spur of carving noise: it may stay unpaired, and is then dropped; a
 junction with an odd number of branches and no spur, near a free end whose cable heads towards
-it, has lost a branch: the gap is bridged. Degree 2 junctions are passed through, degree 3
-junctions join their straightest two branches and end the third, junctions of more than
-``max_degree`` branches are paired greedily by bending, and paths shorter than
+it, has lost a branch: the gap is bridged. Two such junctions joined by a short segment
+(``bigon_length``) are two crossings of a twist whose strands lie together between them:
+the segment is doubled, its copies a radius either side. Degree 2 junctions are passed
+through, degree 3 junctions join their straightest two branches and end the third, junctions
+of more than ``max_degree`` branches are paired greedily by bending, and paths shorter than
 ``min_path_length`` are dropped; each gives a warning.
 """
 
@@ -162,6 +164,9 @@ class TopologySettings:
         A junction with an odd number of branches and no spur (one branch was missed by the
         carving) is joined to a free end within this horizontal distance whose cable heads
         towards it: the gap is bridged straight.
+    bigon_length : float
+        A segment up to this long between two junctions that each miss a branch is taken for
+        two strands lying together between two crossings, and doubled (0: never).
     min_path_length : float
         Paths shorter than this (specks of carving noise) are dropped, unless nothing else is
         left.
@@ -203,6 +208,7 @@ class TopologySettings:
     spur_length: float = 15.0
     unpaired_cost: float = 4.0
     gap_length: float = 10.0
+    bigon_length: float = 30.0
     min_path_length: float = 10.0
     bridge_distance: float = 2.5
     separation: float = 2.2
@@ -219,7 +225,7 @@ class TopologySettings:
                 raise ValueError(f"TopologySettings.{name} must be positive")
         for name in ("anchor_margin", "vertical_weight", "height_cap", "image_prior_views",
                      "image_cap", "top_down_power", "min_pixel_radius", "occluder_margin",
-                     "edge_floor", "spur_length", "unpaired_cost", "gap_length",
+                     "edge_floor", "spur_length", "unpaired_cost", "gap_length", "bigon_length",
                      "min_path_length", "separation"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"TopologySettings.{name} must not be negative")
@@ -449,6 +455,7 @@ def _prepare(graph, radius, up, settings, warnings):
     """The context (with missed branches bridged) and the junctions with their hypotheses."""
     context = _Context(graph, radius, up, settings)
     context = _Context(_close_gaps(context, warnings), radius, up, settings)
+    context = _Context(_double_bigons(context, warnings), radius, up, settings)
     return context, _junctions(context.graph, context, warnings)
 
 
@@ -593,6 +600,58 @@ def _close_gaps(context, warnings):
                    voxels=np.zeros((0, 3), dtype=np.int64))
         warnings.append(f"junction {node}: bridged a gap of {distance / r:.1f} r to a free end "
                         "(a branch the carving missed)")
+    return SegmentGraph(g, origin=graph.origin, voxel_size=graph.voxel_size,
+                        radius=graph.radius)
+
+
+def _odd_junctions(g, r, settings):
+    """Junctions with an odd number of branches and no spur among them (a branch is
+    missing)."""
+    return {node for node, data in g.nodes(data=True)
+            if data["kind"] == "junction" and g.degree(node) % 2
+            and not any(g.nodes[v]["kind"] == "end" and d["length"] < settings.spur_length * r
+                        for _, v, d in g.edges(node, data=True))}
+
+
+def _double_bigons(context, warnings):
+    """The graph with a second segment beside each short one joining two junctions that
+    each miss a branch (a copy; the input is not changed).
+
+    Two strands that cross twice close together (a twist) lie side by side between the two
+    crossings; the carving often gives one segment there, and each crossing then has three
+    branches. The missing branch of each is that second strand: the segment is doubled, and
+    the topology pairs and orders the strands through both junctions as at any crossing.
+    """
+    graph, r, s = context.graph, context.r, context.settings
+    if s.bigon_length <= 0:
+        return graph
+    g = graph.graph
+    odd = _odd_junctions(g, r, s)
+    candidates = sorted((data["length"], u, v, key) for u, v, key, data in g.edges(keys=True,
+                                                                                   data=True)
+                        if u != v and u in odd and v in odd
+                        and data["length"] <= s.bigon_length * r)
+    if not candidates:
+        return graph
+    g = g.copy()
+    used = set()
+    for length, u, v, key in candidates:
+        if u in used or v in used:
+            continue
+        used.update((u, v))
+        data = dict(g.edges[u, v, key])
+        points = np.asarray(data["points"], dtype=float)
+        # side by side: each copy half a cable's width off the carved chain, in the plane, so
+        # that the strands' order around each junction (and so whether they cross) is defined
+        tangent = np.gradient(points, axis=0)
+        side = np.cross(context.up, tangent)
+        side /= np.maximum(np.linalg.norm(side, axis=1, keepdims=True), 1e-12)
+        g.remove_edge(u, v, key)
+        for sign in (1.0, -1.0):
+            g.add_edge(u, v, **{**data, "points": points + sign * r * side})
+        warnings.append(f"junctions {min(u, v)} and {max(u, v)}: the segment of "
+                        f"{length / r:.1f} r between them taken for two strands (each junction "
+                        "missed a branch)")
     return SegmentGraph(g, origin=graph.origin, voxel_size=graph.voxel_size,
                         radius=graph.radius)
 

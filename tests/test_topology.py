@@ -226,6 +226,41 @@ def test_a_figure_eight_is_one_closed_path_with_one_crossing():
     assert over[2] > 2.5
 
 
+def twist_graph():
+    """A cable that comes in, crosses itself twice in a twist and goes back out: two
+    junctions 9 r apart joined by ONE carved segment (the two strands lying together between
+    the crossings), so each has three branches: the free ends' at A, a loop's at B."""
+    b = np.array([9.0, 0.0, 1.0])
+    out, back = ray(30.0, 10.0, lift=2.2, centre=b), ray(330.0, 10.0, centre=b)
+    centre = b + [8.66, 0.0, 0.0]
+    turn = np.radians(np.arange(90.0, -90.0, -6.0))[1:]
+    arc = np.column_stack([centre[0] + 5.0 * np.cos(turn), 5.0 * np.sin(turn),
+                           np.ones(len(turn))])
+    loop = np.vstack([out, arc, back[::-1]])
+    between = np.column_stack([np.arange(0.0, 9.01, 0.3), np.zeros(31), np.ones(31)])
+    first, second = ray(160.0, lift=2.2), ray(200.0)
+    nodes = {"A": ("junction", (0.0, 0.0, 1.0)), "B": ("junction", b),
+             "E1": ("end", first[-1]), "E2": ("end", second[-1])}
+    return graph_from(nodes, [("A", "E1", first), ("A", "E2", second), ("A", "B", between),
+                              ("B", "B", loop)])
+
+
+def test_a_twist_carved_as_one_segment_is_two_strands_and_two_crossings():
+    graph = twist_graph()
+    topology = resolve_topology(graph, [], radius=R, up=UP)
+    assert len(topology.paths) == 1 and not topology.paths[0].closed
+    assert far_ends(topology.paths[0]) == {end_of(160.0), end_of(200.0)}
+    assert len(topology.crossings) == 2
+    assert any("taken for two strands" in w for w in topology.warnings)
+    # without it each junction joins its straightest two branches and ends the third
+    plain = resolve_topology(graph, [], radius=R, up=UP,
+                             settings=TopologySettings(bigon_length=0.0))
+    assert len(plain.crossings) < 2 and not any("two strands" in w for w in plain.warnings)
+    # a long segment between two junctions missing a branch each is left alone
+    assert not any("two strands" in w for w in resolve_topology(
+        graph, [], radius=R, up=UP, settings=TopologySettings(bigon_length=5.0)).warnings)
+
+
 def test_the_one_path_check_overrides_a_pairing_that_splits_the_cable():
     # Two round lobes through one junction, each leaving and coming back straight: pairing each
     # lobe with itself is the straightest, but makes two loops that meet at a single point (two
