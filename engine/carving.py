@@ -86,10 +86,9 @@ class CarvingSettings:
         Nor is one seen by fewer than this fraction of all views: far from the cable, a voxel
         seen by a few cameras only can fall on cable pixels in all of them. Low, because a view
         that does not frame a voxel is no evidence against it: where the views each frame part
-        of a heaped cable (``bench topology``'s hard scenes, a centreline point out of up to
-        67% of them), 0.5 lost the stretches out of most frames; 0.3 keeps them (tuning seeds
-        0-3: 1-2 more crossings right each, completeness 0.78-0.95 -> 0.84-0.98) and changes
-        nothing on the easy ones (seeds 0-5).
+        of the cable (``bench topology``'s hard scenes), 0.5 lost the stretches out of most
+        frames; 0.3 keeps them and changes no row of ``bench pipeline`` or ``bench carve``
+        (README, *Hard topology*).
     min_piece_length : float
         Occupied pieces (26-connected) whose box has a diagonal shorter than this many radii
         are dropped: with few views, rays of different parts of the cable meet in small

@@ -1,7 +1,7 @@
 """Seeded cable layouts with known topology: the ground truth of synthetic scenes.
 
 Layouts are built in units of the cable radius (r = 1) and scaled to metres at the end, so the
-same seed gives the same shape at every size. Four kinds:
+same seed gives the same shape at every size. Five kinds:
 
 * :func:`table_layout`: a cable lying on a table (z = 0 is the table, the cable's centre rests
   at z = r) with exactly N crossings, free ends or a closed loop, the upper strand lifted over
@@ -612,10 +612,10 @@ def hard_layout(*, seed=0, radius=0.004, extent=None, crossings=(12, 20),
             length = min(1.05 * length, 40.0 * bound)
             continue
         flat = walk[window[0]:window[1] + 1]
-        before = len(find_crossings_2d(flat))
-        flat = _pushed_apart(flat, find_crossings_2d(flat), settings)
+        before = find_crossings_2d(flat)
+        flat = _pushed_apart(flat, before, settings)
         found = find_crossings_2d(flat)
-        if len(found) != before:
+        if len(found) != len(before):
             continue
         over_first = rng.random(len(found)) < 0.5
         lifted = _stacked_lift(flat, found, over_first, settings)

@@ -187,9 +187,9 @@ def _framed_truth(spec):
     return truth.with_cameras(cameras)
 
 
-#: How much of a hard scene each view frames (:attr:`SceneSpec.framing`): on the hard
-#: layouts a centreline point is out of 20–28% of 30 orbit views on average, an end out of
-#: 19–32% (:func:`.synthetic_cameras.out_of_frame`, seeds 0–2).
+#: How much of a hard scene each view frames (:attr:`SceneSpec.framing`): a centreline point
+#: of a hard layout is out of 15–45% of 30 orbit views on average and out of fewer than 80% at
+#: most (:func:`.synthetic_cameras.out_of_frame`; ``test_views_that_frame_part_of_the_cable``).
 HARD_FRAMING = 0.6
 
 

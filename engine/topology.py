@@ -1181,38 +1181,53 @@ def _slot_of(branch):
     return branch.edge, branch.side
 
 
-class _UnionFind:
-    def __init__(self):
-        self.parent = {}
+class _Pieces:
+    """How many pieces the chosen matchings make of one connected component, fast enough for
+    the one-path search to try thousands of combinations.
 
-    def find(self, item):
-        parent = self.parent.setdefault(item, item)
-        if parent != item:
-            parent = self.parent[item] = self.find(parent)
-        return parent
-
-    def union(self, a, b):
-        self.parent[self.find(a)] = self.find(b)
-
-
-def _pieces(edges, ends, junctions, ranks):
-    """Pieces the chosen matchings make of one component, and the fewest it could make.
-
-    Spurs left unpaired are not counted (they are dropped); the fewest is one, or half the
-    open ends (free ends and unpaired branches) when there are more than two.
+    A segment's two ends always belong to one piece, so the pieces are the segments joined by
+    the matchings' pairs: each junction's matchings are turned once into pairs of segment
+    indices, and each combination is a small union-find over the segments.
     """
-    union = _UnionFind()
-    for edge in edges:
-        union.union((edge, "start"), (edge, "end"))
-    open_ends, spurs = ends, 0
-    for junction, rank in zip(junctions, ranks):
-        pairs, unpaired, _ = junction.matchings[junction.ranked[rank]]
-        for i, j in pairs:
-            union.union(_slot_of(junction.branches[i]), _slot_of(junction.branches[j]))
-        open_ends += len(unpaired)
-        spurs += sum(junction.branches[k].spur for k in unpaired)
-    roots = {union.find(slot) for edge in edges for slot in ((edge, "start"), (edge, "end"))}
-    return len(roots) - spurs, max(1, (open_ends - 2 * spurs) // 2)
+
+    def __init__(self, edges, ends, junctions):
+        index = {edge: k for k, edge in enumerate(edges)}
+        self.count, self.ends = len(edges), ends
+        self.links, self.unpaired, self.spurs = [], [], []
+        for junction in junctions:
+            links, unpaired, spurs = [], [], []
+            for matching in junction.ranked:
+                pairs, left, _ = junction.matchings[matching]
+                links.append([(index[junction.branches[i].edge], index[junction.branches[j].edge])
+                              for i, j in pairs])
+                unpaired.append(len(left))
+                spurs.append(sum(junction.branches[k].spur for k in left))
+            self.links.append(links)
+            self.unpaired.append(unpaired)
+            self.spurs.append(spurs)
+
+    def __call__(self, ranks):
+        """``(pieces, fewest)`` for a combination (each junction's rank): spurs left unpaired
+        are not counted (they are dropped); the fewest is one, or half the open ends (free
+        ends and unpaired branches) when there are more than two."""
+        parent = list(range(self.count))
+
+        def root(k):
+            while parent[k] != k:
+                parent[k] = parent[parent[k]]
+                k = parent[k]
+            return k
+
+        pieces, open_ends, spurs = self.count, self.ends, 0
+        for links, unpaired, spur, rank in zip(self.links, self.unpaired, self.spurs, ranks):
+            for a, b in links[rank]:
+                a, b = root(a), root(b)
+                if a != b:
+                    parent[a] = b
+                    pieces -= 1
+            open_ends += unpaired[rank]
+            spurs += spur[rank]
+        return pieces - spurs, max(1, (open_ends - 2 * spurs) // 2)
 
 
 def _one_path_per_cable(junctions, context, warnings):
@@ -1234,13 +1249,14 @@ def _one_path_per_cable(junctions, context, warnings):
         ends = sum(1 for n in component if g.nodes[n]["kind"] == "end")
         if not members:
             continue
-        logs = [j.matching_log_p[j.ranked] for j in members]
+        logs = [[float(v) for v in j.matching_log_p[j.ranked]] for j in members]
+        count_pieces = _Pieces(edges, ends, members)
 
         def total(ranks):
             return float(sum(log[k] for log, k in zip(logs, ranks)))
 
         def valid(ranks):
-            pieces, fewest = _pieces(edges, ends, members, ranks)
+            pieces, fewest = count_pieces(ranks)
             return pieces <= fewest
 
         start = tuple(0 for _ in members)
@@ -1256,13 +1272,14 @@ def _one_path_per_cable(junctions, context, warnings):
             if valid(ranks):
                 found.append((-negative, ranks))
             for k in range(len(members)):
-                if ranks[k] + 1 < len(logs[k]) and np.isfinite(logs[k][ranks[k] + 1]):
+                if ranks[k] + 1 < len(logs[k]) and math.isfinite(logs[k][ranks[k] + 1]):
                     step = ranks[:k] + (ranks[k] + 1,) + ranks[k + 1:]
                     if step not in seen:
-                        seen.add(step)
-                        heapq.heappush(heap, (-total(step), step))
+                        seen.add(step)  # one rank down at one junction: its score moves
+                        heapq.heappush(heap, (negative + logs[k][ranks[k]]
+                                              - logs[k][ranks[k] + 1], step))
         if not found:
-            pieces, fewest = _pieces(edges, ends, members, start)
+            pieces, fewest = count_pieces(start)
             warnings.append(
                 f"no pairing at junction(s) {', '.join(str(j.node) for j in members)} "
                 f"(of {tried} tried) joins their cable into {fewest} path(s): kept as "
