@@ -57,6 +57,17 @@ def _aims(rng, views, target, reach, framing):
     return aims
 
 
+def _framed(truth, width, height, focal, framing, rng, views):
+    """The target, the viewing distance (``framing`` times the whole cable's) and each view's
+    aim (:func:`_aims`)."""
+    if not 0.2 <= framing <= 1.0:
+        raise ValueError("framing must lie between 0.2 and 1")
+    target, distance = _framing(truth, width, height, focal)
+    aims = _aims(rng, views, target,
+                 distance * math.sin(math.atan(0.5 * min(width, height) / focal)), framing)
+    return target, framing * distance, aims
+
+
 def orbit_cameras(truth, *, views=30, width=960, height=720, elevations=(45.0, 75.0),
                   focal=None, name_format="{:03d}.png", seed=0, framing=1.0):
     """Cameras on a ring around the cable, looking at its centre.
@@ -85,14 +96,10 @@ def orbit_cameras(truth, *, views=30, width=960, height=720, elevations=(45.0, 7
     -------
     tuple of Camera
     """
-    if not 0.2 <= framing <= 1.0:
-        raise ValueError("framing must lie between 0.2 and 1")
     focal = 1.1 * width if focal is None else float(focal)
     rng = np.random.default_rng([seed, views, 5])
-    target, distance = _framing(truth, width, height, focal)
-    aims = _aims(np.random.default_rng([seed, views, 6]), views, target,
-                 distance * math.sin(math.atan(0.5 * min(width, height) / focal)), framing)
-    distance *= framing
+    _, distance, aims = _framed(truth, width, height, focal, framing,
+                                np.random.default_rng([seed, views, 6]), views)
     low, high = elevations
     cameras = []
     for k in range(views):
@@ -135,14 +142,10 @@ def handheld_cameras(truth, *, views=30, width=960, height=720, arc_degrees=240.
     -------
     tuple of Camera
     """
-    if not 0.2 <= framing <= 1.0:
-        raise ValueError("framing must lie between 0.2 and 1")
     focal = 1.1 * width if focal is None else float(focal)
     rng = np.random.default_rng([seed, views, 9])
-    target, distance = _framing(truth, width, height, focal)
-    around = _aims(np.random.default_rng([seed, views, 10]), views, target,
-                   distance * math.sin(math.atan(0.5 * min(width, height) / focal)), framing)
-    distance *= framing
+    target, distance, around = _framed(truth, width, height, focal, framing,
+                                       np.random.default_rng([seed, views, 10]), views)
     start = rng.uniform(0.0, 2 * math.pi)
     phases = rng.uniform(0.0, 2 * math.pi, size=4)
     low, high = elevations
