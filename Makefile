@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.requirements-installed
 
-.PHONY: setup demo test package sample sample-looks render bench-blender clean
+.PHONY: setup demo test package sample sample-looks sample-hard render bench-blender clean
 
 setup: $(STAMP)
 
@@ -36,6 +36,16 @@ sample-looks: setup
 	  $(PY) tools/render_sample.py --output samples/looks/$$1-$$2 --look $$1 --look-seed $$2 \
 	    --seed $$2 --crossings $$3 --extent 0.42 --views 20 --size 640x480 --samples 16 \
 	    --threads 1 --overwrite || exit 1; done
+
+# Re-render the held-out hard layouts in samples/hard (seed:look; a heap of 12-20 crossings,
+# each of 30 views at 960x720 framing part of it: about 11 min a capture on two cores; never
+# run by CI; `python -m engine bench topology` reconstructs them).
+HARD_CAPTURES := 1004:default 1005:hard_light
+sample-hard: setup
+	@for spec in $(HARD_CAPTURES); do set -- $$(echo $$spec | tr : ' '); \
+	  $(PY) tools/render_sample.py --output samples/hard/hard-$$1 --layout hard --seed $$1 \
+	    --look $$2 --look-seed $$1 --views 30 --size 960x720 --samples 16 --overwrite \
+	    || exit 1; done
 
 # docs/result.jpg: the demo's curve rendered with Cycles over its photo (after make demo).
 render: setup

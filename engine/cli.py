@@ -180,12 +180,12 @@ def _family_options(args):
 
 
 def _topology_families(args):
-    """``bench topology``'s ``--families``: easy, hard or both."""
+    """``bench topology``'s ``--families``: easy, hard or both, without the Cycles captures."""
     if args.families is None:
         return {}
     from .topology_benchmark import TOPOLOGY_FAMILIES
 
-    return {"families": _chosen_families(args, TOPOLOGY_FAMILIES, "topology")}
+    return {"families": _chosen_families(args, TOPOLOGY_FAMILIES, "topology"), "captures": None}
 
 
 def _run_bench(args):
@@ -325,7 +325,7 @@ def build_parser():
     bench.add_argument("--families", metavar="NAMES",
                        help="comma-separated families: look families (looks, pipeline-looks: "
                             "those only, without the Cycles captures and real photos) or "
-                            "easy, hard (topology)")
+                            "easy, hard (topology: those only, without the Cycles captures)")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")
     bench.set_defaults(run=_run_bench)

@@ -8,6 +8,10 @@ Two families of scenes (30 views at 960x720, the default look, true cameras):
   loops, strands side by side (:func:`.synthetic_layouts.hard_layout`), seen by views that
   each frame only part of it (:data:`.synthetic_scene.HARD_FRAMING`).
 
+The Cycles captures of hard layouts in ``samples/hard`` (``make sample-hard``: realistic
+renders of held-out seeds, 30 views at 960x720, the cable out of many frames) are a third,
+held-out family, *Cycles hard*.
+
 Each family runs on tuning seeds and on held-out seeds (:data:`.synthetic_looks.TUNING_SEEDS`,
 :data:`.synthetic_looks.HELD_OUT_SEEDS`; tune on the first only), each scene reconstructed in
 a fresh process twice: with the **exact** masks (labelled *oracle*: they are the truth) and
@@ -24,15 +28,19 @@ from pathlib import Path
 import numpy as np
 
 from .benchmarks import in_fresh_process
+from .ground_truth import read_ground_truth
 from .pipeline_benchmark import scored_run
 from .synthetic_looks import HELD_OUT_SEEDS, TUNING_SEEDS
 from .synthetic_scene import SceneSpec, hard_spec, make_scene, write_scene
 
-__all__ = ["TOPOLOGY_FAMILIES", "SUMMARY_COLUMNS", "SCENE_COLUMNS", "topology_spec",
+__all__ = ["TOPOLOGY_FAMILIES", "CAPTURES", "CAPTURE_FAMILY", "SUMMARY_COLUMNS", "SCENE_COLUMNS", "topology_spec",
            "bench_topology"]
 
 #: The scene families, easy first.
 TOPOLOGY_FAMILIES = ("easy", "hard")
+#: The Cycles captures of hard layouts (``make sample-hard``; held out) and their rows' family.
+CAPTURES = Path("samples") / "hard"
+CAPTURE_FAMILY = "Cycles hard"
 
 _MASKS = (("oracle: exact", True), ("ours", False))
 
@@ -90,8 +98,10 @@ def _summary(family, split, masks, rows):
     return summary
 
 
-def bench_topology(*, seeds=3, views=30, families=TOPOLOGY_FAMILIES, progress=None):
-    """Reconstruct each family's tuning and held-out scenes with the exact masks and ours.
+def bench_topology(*, seeds=3, views=30, families=TOPOLOGY_FAMILIES, captures=CAPTURES,
+                   progress=None):
+    """Reconstruct each family's tuning and held-out scenes, and the Cycles captures of hard
+    layouts, with the exact masks and ours.
 
     Parameters
     ----------
@@ -100,13 +110,17 @@ def bench_topology(*, seeds=3, views=30, families=TOPOLOGY_FAMILIES, progress=No
     views : int, optional
     families : sequence of str, optional
         Of :data:`TOPOLOGY_FAMILIES`.
+    captures : path, optional
+        Folder of pre-rendered Cycles captures (one folder each, as ``make sample-hard``
+        writes them; all held out); None or a missing folder: none.
     progress : callable, optional
         ``progress(fraction, message)``.
 
     Returns
     -------
     summary : list of dict
-        One row per family, seed set and masks (see the module notes).
+        One row per family, seed set and masks (see the module notes), then one per masks
+        over the captures (family ``"Cycles hard"``).
     scenes : list of dict
         One row per scene and masks.
     """
@@ -115,34 +129,55 @@ def bench_topology(*, seeds=3, views=30, families=TOPOLOGY_FAMILIES, progress=No
     jobs = [(family, split, seed) for family in families
             for split, pool in (("tuning", TUNING_SEEDS), ("held-out", HELD_OUT_SEEDS))
             for seed in pool[:seeds]]
-    scenes, summary = [], []
+    jobs += [(CAPTURE_FAMILY, "held-out", folder) for folder in _captures(captures)]
+    scenes = []
     with tempfile.TemporaryDirectory(prefix="bench_topology_") as work:
         for number, (family, split, seed) in enumerate(jobs):
+            label = seed.name if isinstance(seed, Path) else seed
             if progress is not None:
-                progress(number / len(jobs), f"{family} {split} {seed}")
-            folder = Path(work) / f"{family}-{seed}"
+                progress(number / len(jobs), f"{family} {split} {label}")
+            head = {"family": family, "set": split, "seed": label}
             try:
-                scene = make_scene(topology_spec(family, seed, views=views))
+                folder, crossings = _scene_folder(seed, family, views, Path(work))
             except Exception as error:  # a layout that cannot be drawn is a row, not a stop
-                for label, _ in _MASKS:
-                    scenes.append({"family": family, "set": split, "seed": seed,
-                                   "masks": label, "error": f"scene: {error}"[:80]})
+                scenes += [{**head, "masks": masks, "error": f"scene: {error}"[:80]}
+                           for masks, _ in _MASKS]
                 continue
-            write_scene(scene, folder)
-            for label, exact in _MASKS:
-                row = {"family": family, "set": split, "seed": seed, "masks": label,
-                       "true_crossings": len(scene.truth.crossings)}
+            for masks, exact in _MASKS:
+                row = {**head, "masks": masks, "true_crossings": crossings}
                 row.update(in_fresh_process(
                     scored_run, str(folder), str(folder / "ground_truth.json"), True,
                     str(folder / "masks") if exact else None, None, True))
                 scenes.append(row)
-    for family in families:
-        for split in ("tuning", "held-out"):
-            for label, _ in _MASKS:
-                summary.append(_summary(family, split, label, [
-                    row for row in scenes if (row["family"], row["set"], row["masks"])
-                    == (family, split, label)]))
+    groups = [(family, split) for family in families for split in ("tuning", "held-out")]
+    if any(family == CAPTURE_FAMILY for family, _, _ in jobs):
+        groups.append((CAPTURE_FAMILY, "held-out"))
+    summary = []
+    for family, split in groups:
+        for masks, _ in _MASKS:
+            chosen = [row for row in scenes
+                      if (row["family"], row["set"], row["masks"]) == (family, split, masks)]
+            summary.append(_summary(family, split, masks, chosen))
     if progress is not None:
         progress(1.0, "done")
     return summary, [{key: value for key, value in row.items() if key != "checks"}
                      for row in scenes]
+
+
+def _captures(folder):
+    """The capture folders (holding a ground truth) under ``folder``, sorted; none if None."""
+    if folder is None or not Path(folder).is_dir():
+        return []
+    return [path for path in sorted(Path(folder).iterdir())
+            if (path / "ground_truth.json").is_file()]
+
+
+def _scene_folder(seed, family, views, work):
+    """``(folder, true crossings)`` of a job: a capture's own folder, or the scene of
+    ``family`` and ``seed`` rendered into ``work``."""
+    if isinstance(seed, Path):
+        return seed, len(read_ground_truth(seed / "ground_truth.json").crossings)
+    scene = make_scene(topology_spec(family, seed, views=views))
+    folder = work / f"{family}-{seed}"
+    write_scene(scene, folder)
+    return folder, len(scene.truth.crossings)

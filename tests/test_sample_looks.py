@@ -1,5 +1,6 @@
-"""The Cycles sample renderer's looks (at a tiny size): look.json, the lifted truth, clutter that
-never hides the cable, and the pre-rendered held-out captures in samples/looks."""
+"""The Cycles sample renderer's looks and hard layouts (at a tiny size): look.json, the lifted
+truth, clutter that never hides the cable, a heap framed in part, and the pre-rendered held-out
+captures in samples/looks and samples/hard."""
 
 import dataclasses
 import json
@@ -14,11 +15,12 @@ import pytest
 from conftest import ROOT
 from engine import read_colmap_model
 from engine.ground_truth import read_ground_truth
-from engine.synthetic_cameras import cable_pixel_width
-from engine.synthetic_layouts import table_layout
+from engine.synthetic_cameras import cable_pixel_width, out_of_frame
+from engine.synthetic_layouts import hard_layout, table_layout
 from engine.synthetic_looks import HELD_OUT_SEEDS, sample_look
 
 LOOKS = ROOT / "samples" / "looks"
+HARD = ROOT / "samples" / "hard"
 
 sys.path.insert(0, str(ROOT / "tools"))
 import render_sample  # noqa: E402  (no bpy at import)
@@ -57,6 +59,19 @@ def test_a_lifted_look_writes_its_look_and_the_lifted_truth(tmp_path):
     np.testing.assert_allclose(truth.centreline[:, :2], flat.centreline[:, :2])
     np.testing.assert_allclose(truth.centreline[:, 2], flat.centreline[:, 2] + look.lift * 0.006)
     for name in ("000", "001"):  # Blender's cable is where the lifted truth says
+        cable, _, mask = silhouettes(out, name)
+        assert mask.sum() > 300
+        assert (cable & mask).sum() / (cable | mask).sum() > 0.9
+
+
+def test_a_hard_layout_renders_as_the_heap_of_its_seed(tmp_path):
+    out = render(tmp_path, "hard", "--layout", "hard", "--size", "160x120", "--samples", "1",
+                 "--silhouette")
+    truth = read_ground_truth(out / "ground_truth.json")
+    assert truth.kind == "hard" and len(truth.crossings) >= 12  # --crossings 2 is ignored
+    np.testing.assert_allclose(truth.centreline,
+                               hard_layout(seed=1, radius=0.006).centreline)
+    for name in ("000", "001"):
         cable, _, mask = silhouettes(out, name)
         assert mask.sum() > 300
         assert (cable & mask).sum() / (cable | mask).sum() > 0.9
@@ -115,3 +130,26 @@ def test_prerendered_looks_are_complete_and_held_out():
             assert placed
             for obj in placed:
                 assert render_sample.clear_of_cable(obj, truth.cameras, masks)[0]
+
+
+@pytest.mark.skipif(not HARD.is_dir(), reason="no pre-rendered hard layouts")
+def test_prerendered_hard_layouts_are_held_out_heaps_partly_out_of_frame():
+    folders = sorted(p for p in HARD.iterdir() if p.is_dir())
+    assert len(folders) >= 2
+    for folder in folders:
+        seed = json.loads((folder / "look.json").read_text())["seed"]
+        truth = read_ground_truth(folder / "ground_truth.json")
+        assert folder.name.startswith("hard-") and int(folder.name[5:]) in HELD_OUT_SEEDS
+        assert seed in HELD_OUT_SEEDS
+        assert truth.kind == "hard" and 12 <= len(truth.crossings) <= 20
+        np.testing.assert_allclose(truth.centreline,
+                                   hard_layout(seed=int(folder.name[5:])).centreline)
+        model = read_colmap_model(folder / "sparse")
+        assert len(truth.cameras) == 30
+        assert [c.name for c in model.cameras] == [c.name for c in truth.cameras]
+        for camera in truth.cameras:
+            assert (camera.width, camera.height) == (960, 720)
+            assert (folder / "images" / camera.name).is_file()
+            assert (folder / "masks" / camera.name.replace(".jpg", ".png")).is_file()
+        outside = out_of_frame(truth, truth.cameras)  # each view frames part of the heap
+        assert outside.mean() > 0.1 and outside.max() < 0.9

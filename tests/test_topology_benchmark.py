@@ -4,9 +4,10 @@ import inspect
 
 import pytest
 
-from engine.synthetic_scene import HARD_FRAMING
-from engine.topology_benchmark import (SCENE_COLUMNS, SUMMARY_COLUMNS, TOPOLOGY_FAMILIES,
-                                       _summary, topology_spec)
+from engine.synthetic_scene import HARD_FRAMING, SceneSpec, make_scene, write_scene
+from engine.topology_benchmark import (CAPTURE_FAMILY, SCENE_COLUMNS, SUMMARY_COLUMNS,
+                                       TOPOLOGY_FAMILIES, _summary, bench_topology,
+                                       topology_spec)
 
 
 def test_the_families_are_the_easy_layouts_and_the_partly_framed_heaps():
@@ -61,9 +62,29 @@ def test_the_command_line_gives_the_bench_its_families(monkeypatch, capsys):
     monkeypatch.setattr(engine.topology_benchmark, "bench_topology", fake)
     assert main(["-q", "bench", "topology", "--families", "hard", "--seeds", "2"]) == 0
     assert calls[-1]["families"] == ("hard",) and calls[-1]["seeds"] == 2
+    assert calls[-1]["captures"] is None  # chosen families only
     out = capsys.readouterr().out
     assert out.count("| family |") == 2 and "scene: no layout" in out
     assert all(column in out for column in SCENE_COLUMNS)
+    assert main(["-q", "bench", "topology"]) == 0
+    assert "families" not in calls[-1] and "captures" not in calls[-1]  # all, captures too
+    capsys.readouterr()
     assert main(["-q", "bench", "topology", "--families", "easy,knots"]) == 2
     assert "unknown topology family knots" in capsys.readouterr().err
     assert TOPOLOGY_FAMILIES == ("easy", "hard")
+
+
+def test_captures_are_a_held_out_family_of_their_own(tmp_path):
+    captures = tmp_path / "hard"
+    write_scene(make_scene(SceneSpec(crossings=1, seed=2, views=8, width=480, height=360)),
+                captures / "hard-7")
+    (captures / "notes").mkdir()  # a folder without a ground truth is no capture
+    summary, scenes = bench_topology(seeds=0, families=(), captures=captures)
+    assert [(row["family"], row["set"], row["seed"]) for row in scenes] == \
+        [(CAPTURE_FAMILY, "held-out", "hard-7")] * 2
+    assert {row["masks"] for row in scenes} == {"oracle: exact", "ours"}
+    assert all(row["true_crossings"] == 1 and "error" not in row for row in scenes)
+    assert [(row["family"], row["masks"], row["scenes"]) for row in summary] == \
+        [(CAPTURE_FAMILY, "oracle: exact", 1), (CAPTURE_FAMILY, "ours", 1)]
+    assert summary[0]["crossings"] == "1/1"  # a real, scored run
+    assert bench_topology(seeds=0, families=(), captures=tmp_path / "none") == ([], [])

@@ -1,6 +1,7 @@
 """Render a realistic sample sequence with Blender's Cycles (CPU): `make sample`.
 
-A seeded table layout (engine.synthetic_layouts) is built in Blender as a bevelled curve on a
+A seeded table layout, or a hard one (a heap of crossings close together, each view framing part
+of it: `--layout hard`; engine.synthetic_layouts), is built in Blender as a bevelled curve on a
 textured table (the engine's table texture, so structure-from-motion has features), lit by a
 sun and a sky, and rendered from hand-held-like cameras. Written next to the JPEG frames: the
 exact cable masks (ray-cast by the engine from the same geometry), a COLMAP text model of the
@@ -23,7 +24,8 @@ clear of the cable's exact mask (checked again before anything is rendered), so 
 masks stay exact.
 
     python tools/render_sample.py [-o samples/sequence] [--views 24] [--size 960x720]
-                                  [--crossings 3] [--seed 3] [--radius 0.004] [--extent M]
+                                  [--layout table|hard] [--crossings 3] [--seed 3]
+                                  [--radius 0.004] [--extent M]
                                   [--samples 32] [--look FAMILY] [--look-seed N]
                                   [--threads N] [--texture-size N] [--overwrite]
                                   [--silhouette]
@@ -442,6 +444,11 @@ def parse_args(argv=None):
     parser.add_argument("-o", "--output", default=str(ROOT / "samples" / "sequence"))
     parser.add_argument("--views", type=int, default=24)
     parser.add_argument("--size", default="960x720")
+    parser.add_argument("--layout", default="table", choices=("table", "hard"),
+                        help="table: a cable with --crossings crossings far apart, every view "
+                             "framing it; hard: a heap of 12-20 crossings close together "
+                             "(engine.synthetic_layouts.hard_layout; --crossings ignored), "
+                             "each view framing part of it")
     parser.add_argument("--crossings", type=int, default=3)
     parser.add_argument("--seed", type=int, default=3, help="seeds the layout and the cameras")
     parser.add_argument("--radius", type=float, default=0.004, help="metres")
@@ -484,15 +491,21 @@ def main():
     from cable_reconstruction.engine import write_colmap_model
     from cable_reconstruction.engine.ground_truth import write_ground_truth
     from cable_reconstruction.engine.synthetic_cameras import cable_pixel_width, handheld_cameras
-    from cable_reconstruction.engine.synthetic_layouts import table_layout
+    from cable_reconstruction.engine.synthetic_layouts import hard_layout, table_layout
+    from cable_reconstruction.engine.synthetic_scene import HARD_FRAMING
     from cable_reconstruction.engine.synthetic_render import render_masks
     from cable_reconstruction.engine.synthetic_textures import table_texture
 
     look = choose_look(args.look, args.look_seed, args.seed)
-    truth = lifted(table_layout(args.crossings, seed=args.seed, radius=args.radius,
-                                extent=args.extent), look)
+    if args.layout == "hard":  # a heap, each view framing part of it (as `bench topology`)
+        layout = hard_layout(seed=args.seed, radius=args.radius, extent=args.extent)
+    else:
+        layout = table_layout(args.crossings, seed=args.seed, radius=args.radius,
+                              extent=args.extent)
+    truth = lifted(layout, look)
     cameras = handheld_cameras(truth, views=args.views, width=width, height=height,
-                               elevations=(45.0, 75.0), name_format="{:03d}.jpg", seed=args.seed)
+                               elevations=(45.0, 75.0), name_format="{:03d}.jpg", seed=args.seed,
+                               framing=HARD_FRAMING if args.layout == "hard" else 1.0)
     truth = truth.with_cameras(cameras)
     masks = list(render_masks(truth, cameras))
     placed = place_clutter(truth, cameras, masks, look)
