@@ -51,6 +51,9 @@ _ANOTHER = 0.3
 _MORE = 6
 _HUE_APART = 25
 _HUED = 50
+#: :func:`find_cables`: another cable grouped with a found one holds at least this share of
+#: the group's pixels.
+_PART = 0.2
 
 
 def reduced(image_rgb, size=_SMALL):
@@ -347,7 +350,8 @@ def find_cables(images_rgb):
     then each further candidate at least :data:`_ANOTHER` as cable-like over the frames,
     sharing no colour cluster with those found, of a hue (not colourless) at least
     :data:`_HUE_APART` from theirs (a candidate of a found cable's hue is its shading or a
-    table of its hue).
+    table of its hue). A candidate that holds a found cable's clusters offers its clusters
+    of another hue (:func:`_other_part`).
 
     Two cables that cross are often one candidate (one thin object of two colours), which
     :func:`.segmentation.sequence_colour` splits by hue.
@@ -363,15 +367,46 @@ def find_cables(images_rgb):
     found, taken = [(range_of(hsv[best.mask]), best)], set(best.members)
     hues = [_hue_of(hsv[best.mask])]
     reference = max(totals)
+    labels = _nearest(_lab(small), best.centres)
+
+    def apart(hue):
+        return hue is not None and all(h is None or _hue_gap(h, hue) >= _HUE_APART
+                                       for h in hues)
+
     for total, candidate in sorted(zip(totals, candidates), key=lambda item: -item[0]):
+        if total < _ANOTHER * reference:
+            continue
+        if taken & set(candidate.members):  # a found cable with another: keep the other
+            candidate = _other_part(candidate, taken, labels, hsv, apart)
+            if candidate is None:
+                continue
         hue = _hue_of(hsv[candidate.mask])
-        if (total < _ANOTHER * reference or taken & set(candidate.members) or hue is None
-                or any(h is not None and _hue_gap(h, hue) < _HUE_APART for h in hues)):
+        if not apart(hue):
             continue
         found.append((range_of(hsv[candidate.mask]), candidate))
         taken |= set(candidate.members)
         hues.append(hue)
     return found
+
+
+def _other_part(candidate, taken, labels, hsv, apart):
+    """The clusters of a candidate that holds found clusters (``taken``) and others of a hue
+    of their own (``apart`` from the found cables' and from each found cluster's: a found
+    candidate may hold two cables, its mean hue neither's), as a
+    candidate of their own, or None.
+
+    The greedy grouping of :func:`colour_candidates` adds a cluster only when it makes the
+    group more cable-like, so a found cable's clusters grouped with another hue's are often
+    two cables crossing (a cable of a table's hue is found no other way: its shade side is
+    the table's cluster). The other hue's pixels must be :data:`_PART` of the group's.
+    """
+    hues = {k: _hue_of(hsv[labels == k]) for k in taken | set(candidate.members)}
+    others = [k for k in candidate.members if k not in taken and apart(hues[k]) and all(
+        hues[t] is None or _hue_gap(hues[t], hues[k]) >= _HUE_APART for t in taken)]
+    mask = candidate.mask & np.isin(labels, others)
+    if not others or mask.sum() < _PART * candidate.mask.sum():
+        return None
+    return CableCandidate(candidate.score, tuple(others), candidate.centres, mask)
 
 
 def _hue_of(hsv_pixels):
