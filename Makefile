@@ -1,27 +1,61 @@
 # The two README commands: `make demo` and `make test`. Both set up .venv from the pinned
 # requirements first (only when the requirements changed) and are safe to run again.
+#
+# Blender lines (README: Supported Blender versions): .venv is the newest Blender (bpy 5.3,
+# Python 3.13, numpy 2); `make test-all` also runs the suite in .venv-5.2 (the LTS, Python
+# 3.13) and .venv-4.5 (the LTS before it, Python 3.11, numpy 1.26), each from its own
+# requirements-dev*.txt. PYTHON313 and PYTHON311 name the interpreters if they are not found.
 
-PYTHON ?= $(shell command -v python3.11 || command -v python3)
+comma := ,
+# The first of python$(1), pyenv's and Debian's python$(1) that runs and is that version (a
+# pyenv shim of a version not selected is found but does not run).
+find_python = $(firstword $(foreach p,python$(1) $(wildcard $(or $(PYENV_ROOT),$(HOME)/.pyenv)/versions/$(1)*/bin/python$(1)) \
+  /usr/bin/python$(1),$(shell $(p) -c 'import sys; sys.version_info[:2] == ($(subst .,$(comma),$(1))) \
+  and print(sys.executable)' 2>/dev/null)))
+PYTHON313 ?= $(call find_python,3.13)
+PYTHON311 ?= $(call find_python,3.11)
 VENV   := .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.requirements-installed
+COMMON := requirements.txt requirements-test.txt
 
-.PHONY: setup demo test package sample sample-looks sample-hard render bench-blender clean
+.PHONY: setup setup-all demo test test-4.5 test-5.2 test-all package sample sample-looks \
+        sample-hard render bench-blender clean
 
-setup: $(STAMP)
+# A line's virtual environment: $(1) folder, $(2) requirements file, $(3) interpreter,
+# $(4) its version. Made again when it holds another Python (an older checkout's .venv).
+define line_venv
+$(1)/.requirements-installed: $(COMMON) $(2)
+	@test -n "$(3)" || { echo "Python $(4) is required for $(1) ($(2)) but was not found:" \
+	  "install it (e.g. \`pyenv install $(4)\`) or pass PYTHON$(subst .,,$(4))=/path/to/python$(4)" >&2; exit 1; }
+	@$(1)/bin/python -c 'import sys; sys.exit(sys.version_info[:2] != ($(subst .,$(comma) ,$(4))))' \
+	  2>/dev/null || { rm -rf $(1) && $(3) -m venv $(1); }
+	$(1)/bin/python -m pip install --quiet --disable-pip-version-check -r $(2)
+	touch $$@
+endef
+$(eval $(call line_venv,$(VENV),requirements-dev.txt,$(PYTHON313),3.13))
+$(eval $(call line_venv,.venv-5.2,requirements-dev-5.2.txt,$(PYTHON313),3.13))
+$(eval $(call line_venv,.venv-4.5,requirements-dev-4.5.txt,$(PYTHON311),3.11))
 
-$(STAMP): requirements.txt requirements-dev.txt
-	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else \
-	  "Python 3.11 is required (Blender 4.5-5.0 and the bpy wheel use it); found " + sys.version.split()[0])'
-	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements-dev.txt
-	touch $(STAMP)
+setup: $(VENV)/.requirements-installed
+
+setup-all: setup .venv-5.2/.requirements-installed .venv-4.5/.requirements-installed
 
 demo: setup
 	$(PY) tools/demo.py
 
 test: setup
 	$(PY) -m pytest
+
+# The suite in the other Blender lines (the installer test through each one's own installer).
+test-4.5: .venv-4.5/.requirements-installed
+	.venv-4.5/bin/python -m pytest
+
+test-5.2: .venv-5.2/.requirements-installed
+	.venv-5.2/bin/python -m pytest
+
+# Every line, the newest last: its run also checks that the sample reconstructs to the same
+# points in the others (tests/test_blender_lines.py).
+test-all: test-4.5 test-5.2 test
 
 # Re-render the realistic sample with Cycles (slow: about 40 s a frame; never run by CI).
 sample: setup

@@ -1,20 +1,25 @@
 """Command-line flags derived from the engine's settings dataclasses, so defaults never drift."""
 
 import dataclasses
+import inspect
 import re
 
 __all__ = ["add_settings_arguments", "settings_from_arguments", "field_help"]
 
 
 def field_help(cls):
-    """Per field, the first sentence of its numpydoc ``Attributes`` entry."""
+    """Per field, the first sentence of its numpydoc ``Attributes`` entry.
+
+    The docstring is dedented first: Python 3.13 strips a docstring's indentation when it
+    compiles it, 3.11 keeps it.
+    """
     entries, current = {}, None
-    for line in (cls.__doc__ or "").splitlines():
-        if re.match(r"^    \w+(, \w+)* : ", line):
+    for line in inspect.cleandoc(cls.__doc__ or "").splitlines():
+        if re.match(r"^\w+(, \w+)* : ", line):
             current = re.findall(r"\w+", line.split(" : ")[0])
             for name in current:
                 entries[name] = []
-        elif current and line.startswith("        ") and line.strip():
+        elif current and line.startswith("    ") and line.strip():
             for name in current:
                 entries[name].append(line.strip())
         elif not line.strip():

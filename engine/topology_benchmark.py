@@ -149,11 +149,8 @@ def bench_topology(*, seeds=3, views=30, families=TOPOLOGY_FAMILIES, captures=CA
                     scored_run, str(folder), str(folder / "ground_truth.json"), True,
                     str(folder / "masks") if exact else None, None, True))
                 scenes.append(row)
-    groups = [(family, split) for family in families for split in ("tuning", "held-out")]
-    if any(family == CAPTURE_FAMILY for family, _, _ in jobs):
-        groups.append((CAPTURE_FAMILY, "held-out"))
     summary = []
-    for family, split in groups:
+    for family, split in dict.fromkeys((family, split) for family, split, _ in jobs):
         for masks, _ in _MASKS:
             chosen = [row for row in scenes
                       if (row["family"], row["set"], row["masks"]) == (family, split, masks)]

@@ -33,7 +33,7 @@ def test_manifest_matches_the_engine_and_supported_blenders():
     assert MANIFEST["id"] == package.EXTENSION_ID
     assert MANIFEST["version"] == __version__
     assert MANIFEST["blender_version_min"] == "4.5.0"
-    assert MANIFEST["blender_version_max"] == "5.1.0"
+    assert MANIFEST["blender_version_max"] == "5.4.0"  # exclusive: 5.3.x is the newest tested
     assert set(MANIFEST["platforms"]) == set(package.PLATFORM_TAGS)
     assert "files" in MANIFEST["permissions"]
     excluded = MANIFEST["build"]["paths_exclude_pattern"]
@@ -48,41 +48,32 @@ def test_root_init_is_the_two_line_entry_point():
 
 
 def _fake_wheel_cache(folder):
-    """Empty files named like each platform's real wheels (the builder only sorts by name)."""
-    tags = {"linux-x64": "cp311-cp311-manylinux_2_28_x86_64",
-            "macos-arm64": "cp311-cp311-macosx_14_0_arm64",
-            "windows-x64": "cp311-cp311-win_amd64"}
-    for platform, tag in tags.items():
+    """Empty files named like each platform's real wheels (the builder only sorts by name):
+    one per Python for the compiled ones, one abi3 wheel for OpenCV, one pure for networkx."""
+    platforms = {"linux-x64": "manylinux_2_28_x86_64", "macos-arm64": "macosx_14_0_arm64",
+                 "windows-x64": "win_amd64"}
+    for platform, tag in platforms.items():
         (folder / platform).mkdir(parents=True)
         for name, version in package.runtime_requirements():
             wheel_name = re.sub(r"[-_.]+", "_", name).lower()
-            wheel_tag = "py3-none-any" if name == "networkx" else tag
-            (folder / platform / f"{wheel_name}-{version}-{wheel_tag}.whl").write_bytes(b"")
+            if name == "networkx":
+                tags = ["py3-none-any"]
+            elif name.startswith("opencv"):
+                tags = [f"cp37-abi3-{tag}"]
+            else:
+                tags = [f"cp{v}-cp{v}-{tag}" for v in ("311", "313")]
+            for wheel_tag in tags:
+                (folder / platform / f"{wheel_name}-{version}-{wheel_tag}.whl").write_bytes(b"")
 
 
-def test_one_zip_per_platform_with_only_its_wheels(tmp_path):
-    _fake_wheel_cache(tmp_path / "cache")
-    zips = package.build(list(package.PLATFORM_TAGS), tmp_path / "dist",
-                         cache=tmp_path / "cache", stage_root=tmp_path / "stage")
-    assert len(zips) == 3
-    names = {name for name, _ in package.runtime_requirements()}
-    assert "numpy" not in names
-    for path, platform in zip(zips, package.PLATFORM_TAGS):
-        with zipfile.ZipFile(path) as archive:
-            files = archive.namelist()
-            manifest = tomllib.loads(archive.read("blender_manifest.toml").decode())
-        wheels = [f for f in files if f.endswith(".whl")]
-        assert len(wheels) == len(names)
-        marker = {"linux-x64": "manylinux", "macos-arm64": "macosx", "windows-x64": "win_amd64"}
-        for wheel in wheels:
-            assert marker[platform] in wheel or wheel.endswith("py3-none-any.whl"), wheel
-        generated = manifest["build"]["generated"]  # what Blender reads for a split build
-        assert generated["platforms"] == [platform]
-        assert sorted(generated["wheels"]) == sorted(f"./{w}" for w in wheels)
-        assert "__init__.py" in files and "addon/__init__.py" in files
-        assert "engine/result.py" in files
-        assert not [f for f in files if f.split("/")[0] in ("tests", "samples", "tools")]
-        assert not [f for f in files if "__pycache__" in f]
+def test_a_wheel_serves_the_pythons_blender_would_install_it_on():
+    assert package.serves("scipy-1.16.3-cp311-cp311-win_amd64.whl", "3.11")
+    assert not package.serves("scipy-1.16.3-cp311-cp311-win_amd64.whl", "3.13")
+    assert package.serves("pycolmap-4.2.1-cp313-cp313-macosx_14_0_arm64.whl", "3.13")
+    abi3 = "opencv_python_headless-4.11.0.86-cp37-abi3-manylinux_2_17_x86_64.whl"
+    assert package.serves(abi3, "3.11") and package.serves(abi3, "3.13")
+    assert not package.serves("x-1.0-cp314-abi3-win_amd64.whl", "3.13")
+    assert package.serves("networkx-3.6.1-py3-none-any.whl", "3.13")
 
 
 @pytest.fixture(scope="module")

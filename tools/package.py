@@ -1,9 +1,15 @@
 """Build the extension zips with Blender's own builder (``make package``).
 
-For each platform: download the runtime wheels (``requirements.txt`` minus numpy, which Blender
-ships) into a cache, stage the extension with those wheels written into its manifest, check it
+For each platform: download the runtime wheels (``requirements.txt``; numpy is never bundled,
+Blender ships its own) for each Python a supported Blender embeds (:data:`PYTHONS`: 3.11 for
+Blender 4.5 LTS and 5.0, 3.13 for 5.1 to 5.3) into a cache, stage the extension with those wheels written into its manifest, check it
 with ``blender_ext.py validate`` and build one zip per platform with ``blender_ext.py build
 --split-platforms``. The builder and validator are the ones inside the installed ``bpy`` wheel.
+
+Each zip carries the wheels of both Pythons; when the extension is enabled, Blender installs
+only those whose tags match its own Python (``_extensions_wheel_filter_for_this_system`` in
+``bl_pkg/bl_extension_ops.py``, the same from 4.5 to 5.3): a ``cp311`` wheel in 4.5, a
+``cp313`` one in 5.3, an ``abi3`` or pure one (OpenCV, networkx) in both.
 
     python tools/package.py [--platforms linux-x64,macos-arm64,windows-x64] [--output-dir dist]
 """
@@ -28,6 +34,8 @@ PLATFORM_TAGS = {
     "windows-x64": ["win_amd64"],
 }
 NEVER_BUNDLED = {"numpy"}  # Blender ships its own
+#: The Pythons of the supported Blenders (blender_manifest.toml): wheels for each are bundled.
+PYTHONS = ("3.11", "3.13")
 DEFAULT_CACHE = Path(os.environ.get("CABLE_RECON_WHEEL_CACHE", ROOT / ".cache" / "wheels"))
 
 
@@ -63,27 +71,46 @@ def _wheel_prefix(name, version):
     return f"{re.sub(r'[-_.]+', '_', name).lower()}-{version}-"
 
 
-def platform_wheels(platform, cache):
-    """Wheels of every runtime requirement for ``platform``, downloaded once into ``cache``."""
+def serves(wheel, python):
+    """Whether a wheel (file name) installs on CPython ``python`` ("3.11"), as Blender's filter
+    decides: ``cpXY`` of that version, ``abi3`` from its version up, or pure ``py3``."""
+    python_tags, abi = Path(wheel).stem.split("-")[-3:-1]
+    version = int(python.replace(".", ""))
+    for tag in python_tags.split("."):
+        if tag == "py3" or tag == f"cp{version}":
+            return True
+        if abi == "abi3" and tag.startswith("cp") and int(tag[2:]) <= version:
+            return True
+    return False
+
+
+def platform_wheels(platform, cache, pythons=PYTHONS):
+    """Wheels of every runtime requirement for ``platform`` and each of ``pythons``, downloaded
+    once into ``cache`` (a wheel that serves several Pythons is listed once)."""
     folder = Path(cache) / platform
     folder.mkdir(parents=True, exist_ok=True)
     wheels = []
     for name, version in runtime_requirements():
         prefix = _wheel_prefix(name, version)
-        found = [w for w in folder.glob("*.whl") if w.name.lower().startswith(prefix)]
-        if not found:
-            command = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
-                       "--only-binary=:all:", "--python-version", "3.11",
-                       "--implementation", "cp", "--dest", str(folder), f"{name}=={version}"]
-            for tag in PLATFORM_TAGS[platform]:
-                command += ["--platform", tag]
-            print(f"downloading {name}=={version} for {platform}", file=sys.stderr)
-            subprocess.run(command, check=True)
-            found = [w for w in folder.glob("*.whl") if w.name.lower().startswith(prefix)]
-        if len(found) != 1:
-            sys.exit(f"expected one {name} {version} wheel for {platform} in {folder}, "
-                     f"found {[w.name for w in found]}")
-        wheels.append(found[0])
+        for python in pythons:
+            found = [w for w in folder.glob("*.whl")
+                     if w.name.lower().startswith(prefix) and serves(w.name, python)]
+            if not found:
+                command = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+                           "--only-binary=:all:", "--python-version", python,
+                           "--implementation", "cp", "--dest", str(folder), f"{name}=={version}"]
+                for tag in PLATFORM_TAGS[platform]:
+                    command += ["--platform", tag]
+                print(f"downloading {name}=={version} for {platform}, Python {python}",
+                      file=sys.stderr)
+                subprocess.run(command, check=True)
+                found = [w for w in folder.glob("*.whl")
+                         if w.name.lower().startswith(prefix) and serves(w.name, python)]
+            if len(found) != 1:
+                sys.exit(f"expected one {name} {version} wheel for {platform} and Python {python}"
+                         f" in {folder}, found {[w.name for w in found]}")
+            if found[0] not in wheels:
+                wheels.append(found[0])
     return wheels
 
 

@@ -22,7 +22,8 @@ report["import_menu"] = any(getattr(f, "__module__", "").startswith(module)
 
 # The bundled wheels were unpacked for Blender and load from there (put first on the path so
 # the test environment's own copies cannot stand in for them).
-site = Path(bpy.utils.user_resource("EXTENSIONS")) / ".local" / "lib" / "python3.11" / "site-packages"
+python = f"python{sys.version_info.major}.{sys.version_info.minor}"  # Blender's own Python
+site = Path(bpy.utils.user_resource("EXTENSIONS")) / ".local" / "lib" / python / "site-packages"
 sys.path.insert(0, str(site))
 report["wheels"] = {}
 for name in ("cv2", "pycolmap", "scipy", "networkx"):
