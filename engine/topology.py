@@ -17,6 +17,10 @@ terms from independent cues:
   are joined by a cubic Hermite curve along their tangents; its dimensionless bending energy
   ``L * integral(kappa**2 ds)`` (the squared turning angle for a circular arc) costs
   ``energy / (2 bend_scale**2)``.
+* **A strand's height** (beyond the paper): a strand keeps its height through a junction, so
+  pairing two branches whose heights next to their branch points differ by ``dh`` radii costs
+  ``(dh / pair_height_scale)**2 / 2`` (where curved strands cross at a shallow angle the
+  straightest pairing may join the over strand to the under one).
 * **Height** (beyond the paper): the carved cable is higher where it passes over. The height
   along ``up`` of each branch's centreline next to its branch point is averaged per strand; the
   difference, over ``height_scale``, is the log-odds that the higher strand is over.
@@ -116,6 +120,10 @@ class TopologySettings:
         Height difference between two crossing strands worth one unit of log-odds.
     height_cap : float
         The height cue gives one order at most twice this log-odds over the other.
+    pair_height_scale : float
+        Height difference between a pair's two branches (in radii) that costs half a unit of
+        log-likelihood: pairing branches of differing heights costs ``(dh / pair_height_scale)**2
+        / 2``, as a strand keeps its height through a junction.
     image_gain : float
         Log-odds per unit of the image cue's statistic: the views' weighted mean score over its
         standard error (a t statistic).
@@ -183,6 +191,10 @@ class TopologySettings:
         Junctions with more branches are paired greedily by bending.
     search_budget : int
         Largest number of combinations of matchings the one-path search tries per cable.
+    search_window : float
+        Having found the most likely combination that makes each cable one path, the search
+        weighs the others up to this many log-units less likely (each then weighs under
+        e^-window of it) into every junction's probability.
     """
 
     anchor_distance: float = 3.0
@@ -193,6 +205,7 @@ class TopologySettings:
     vertical_weight: float = 0.3
     height_scale: float = 0.4
     height_cap: float = 3.0
+    pair_height_scale: float = 1.0
     image_gain: float = 0.5
     image_spread: float = 0.1
     image_prior_views: float = 3.0
@@ -216,11 +229,13 @@ class TopologySettings:
     confident: float = 0.9
     max_degree: int = 8
     search_budget: int = 20000
+    search_window: float = 9.0
 
     def __post_init__(self):
         for name in ("anchor_distance", "max_anchor_distance", "height_window", "bend_scale",
-                     "height_scale", "image_gain", "image_spread", "highlight_search",
-                     "edge_scale", "path_radius", "bridge_distance", "lift_width"):
+                     "height_scale", "pair_height_scale", "image_gain", "image_spread",
+                     "highlight_search", "edge_scale", "path_radius", "bridge_distance",
+                     "lift_width"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"TopologySettings.{name} must be positive")
         for name in ("anchor_margin", "vertical_weight", "height_cap", "image_prior_views",
@@ -233,8 +248,9 @@ class TopologySettings:
             raise ValueError("TopologySettings.highlight_clip must lie in (0, 1]")
         if not 0.0 <= self.confident <= 1.0:
             raise ValueError("TopologySettings.confident must lie in [0, 1]")
-        if self.max_degree < 2 or self.search_budget < 1:
-            raise ValueError("TopologySettings.max_degree must be >= 2 and search_budget >= 1")
+        if self.max_degree < 2 or self.search_budget < 1 or not self.search_window >= 0:
+            raise ValueError("TopologySettings.max_degree must be >= 2, search_budget >= 1 "
+                             "and search_window >= 0")
 
 
 @dataclass(frozen=True, eq=False)
@@ -716,6 +732,7 @@ class _Junction:
         self.scores = None
         self.greedy = False
         self.bend = {}
+        self.step = {}             # squared height difference of a pair's branches, in r²
 
     @classmethod
     def build(cls, node, data, context, warnings):
@@ -800,8 +817,9 @@ class _Junction:
         for pairs, _, _ in self.matchings:
             for pair in pairs:
                 if pair not in self.bend:
-                    self.bend[pair] = _bending_energy(self.branches[pair[0]],
-                                                      self.branches[pair[1]], context)
+                    first, second = (self.branches[k] for k in pair)
+                    self.bend[pair] = _bending_energy(first, second, context)
+                    self.step[pair] = ((first.height - second.height) / context.r) ** 2
 
     def _greedy_matching(self, context):
         degree = len(self.branches)
@@ -822,6 +840,7 @@ class _Junction:
         for matching_index, orders in self.hypotheses:
             pairs, unpaired, crossing = self.matchings[matching_index]
             total = -sum(self.bend[pair] for pair in pairs) / (2.0 * s.bend_scale ** 2)
+            total -= sum(self.step[pair] for pair in pairs) / (2.0 * s.pair_height_scale ** 2)
             spurs = sum(self.branches[k].spur for k in unpaired)
             total += s.unpaired_cost * (2 * spurs - len(unpaired))
             for (a, b), first_over in zip(crossing, orders):
@@ -1241,7 +1260,7 @@ def _one_path_per_cable(junctions, context, warnings):
     for junction in junctions:
         junction.ranked = list(np.argsort(-junction.matching_log_p, kind="stable"))
     choice, marginals = {}, {}
-    budget = context.settings.search_budget
+    budget, window = context.settings.search_budget, context.settings.search_window
     for component in _components(g):
         edges = [(d["start"], d["end"], k) for u, v, k, d in g.subgraph(component).edges(
             keys=True, data=True)]
@@ -1267,7 +1286,7 @@ def _one_path_per_cable(junctions, context, warnings):
         while heap and tried < budget:
             negative, ranks = heapq.heappop(heap)
             tried += 1
-            if found and -negative < found[0][0] - 12.0:
+            if found and -negative < found[0][0] - window:
                 break
             if valid(ranks):
                 found.append((-negative, ranks))
