@@ -391,9 +391,9 @@ def find_cables(images_rgb):
 
 def _other_part(candidate, taken, labels, hsv, apart):
     """The clusters of a candidate that holds found clusters (``taken``) and others of a hue
-    of their own (``apart`` from the found cables' and from each found cluster's: a found
-    candidate may hold two cables, its mean hue neither's), as a
-    candidate of their own, or None.
+    of their own, as a candidate of their own, or None. Their own: ``apart`` from the found
+    cables' hues and from each found cluster's (a found candidate may hold two cables, and
+    its mean hue is then neither's).
 
     The greedy grouping of :func:`colour_candidates` adds a cluster only when it makes the
     group more cable-like, so a found cable's clusters grouped with another hue's are often

@@ -17,10 +17,6 @@ terms from independent cues:
   are joined by a cubic Hermite curve along their tangents; its dimensionless bending energy
   ``L * integral(kappa**2 ds)`` (the squared turning angle for a circular arc) costs
   ``energy / (2 bend_scale**2)``.
-* **A strand's height** (beyond the paper): a strand keeps its height through a junction, so
-  pairing two branches whose heights next to their branch points differ by ``dh`` radii costs
-  ``(dh / pair_height_scale)**2 / 2`` (where curved strands cross at a shallow angle the
-  straightest pairing may join the over strand to the under one).
 * **Height** (beyond the paper): the carved cable is higher where it passes over. The height
   along ``up`` of each branch's centreline next to its branch point is averaged per strand; the
   difference, over ``height_scale``, is the log-odds that the higher strand is over.
@@ -120,10 +116,6 @@ class TopologySettings:
         Height difference between two crossing strands worth one unit of log-odds.
     height_cap : float
         The height cue gives one order at most twice this log-odds over the other.
-    pair_height_scale : float
-        Height difference between a pair's two branches (in radii) that costs half a unit of
-        log-likelihood: pairing branches of differing heights costs ``(dh / pair_height_scale)**2
-        / 2``, as a strand keeps its height through a junction.
     image_gain : float
         Log-odds per unit of the image cue's statistic: the views' weighted mean score over its
         standard error (a t statistic).
@@ -205,7 +197,6 @@ class TopologySettings:
     vertical_weight: float = 0.3
     height_scale: float = 0.4
     height_cap: float = 3.0
-    pair_height_scale: float = 1.0
     image_gain: float = 0.5
     image_spread: float = 0.1
     image_prior_views: float = 3.0
@@ -233,9 +224,8 @@ class TopologySettings:
 
     def __post_init__(self):
         for name in ("anchor_distance", "max_anchor_distance", "height_window", "bend_scale",
-                     "height_scale", "pair_height_scale", "image_gain", "image_spread",
-                     "highlight_search", "edge_scale", "path_radius", "bridge_distance",
-                     "lift_width"):
+                     "height_scale", "image_gain", "image_spread", "highlight_search",
+                     "edge_scale", "path_radius", "bridge_distance", "lift_width"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"TopologySettings.{name} must be positive")
         for name in ("anchor_margin", "vertical_weight", "height_cap", "image_prior_views",
@@ -732,7 +722,6 @@ class _Junction:
         self.scores = None
         self.greedy = False
         self.bend = {}
-        self.step = {}             # squared height difference of a pair's branches, in r²
 
     @classmethod
     def build(cls, node, data, context, warnings):
@@ -817,9 +806,8 @@ class _Junction:
         for pairs, _, _ in self.matchings:
             for pair in pairs:
                 if pair not in self.bend:
-                    first, second = (self.branches[k] for k in pair)
-                    self.bend[pair] = _bending_energy(first, second, context)
-                    self.step[pair] = ((first.height - second.height) / context.r) ** 2
+                    self.bend[pair] = _bending_energy(self.branches[pair[0]],
+                                                      self.branches[pair[1]], context)
 
     def _greedy_matching(self, context):
         degree = len(self.branches)
@@ -840,7 +828,6 @@ class _Junction:
         for matching_index, orders in self.hypotheses:
             pairs, unpaired, crossing = self.matchings[matching_index]
             total = -sum(self.bend[pair] for pair in pairs) / (2.0 * s.bend_scale ** 2)
-            total -= sum(self.step[pair] for pair in pairs) / (2.0 * s.pair_height_scale ** 2)
             spurs = sum(self.branches[k].spur for k in unpaired)
             total += s.unpaired_cost * (2 * spurs - len(unpaired))
             for (a, b), first_over in zip(crossing, orders):

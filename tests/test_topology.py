@@ -274,30 +274,6 @@ def test_the_one_path_check_overrides_a_pairing_that_splits_the_cable():
     assert any("changed the pairing" in w for w in topology.warnings)
 
 
-def test_a_strand_keeps_its_height_through_a_junction():
-    # Two strands meet at a shallow angle, one lying 2 r above the other (a strand on top of
-    # a heap): the straightest pairing would join each high branch to a low one and call it a
-    # crossing; pairing by height keeps each strand on its level, side by side, no crossing.
-    def stacked(pair_height_scale):
-        nodes, edges = {0: ("junction", (0.0, 0.0, 2.0))}, []
-        for k, (angle, height) in enumerate(zip([0, 150, 180, 330], [3.0, 3.0, 1.0, 1.0])):
-            points = ray(angle, centre=(0.0, 0.0, height))
-            nodes[k + 1] = ("end", points[-1])
-            edges.append((0, k + 1, points))
-        return resolve_topology(graph_from(nodes, edges), [], radius=R, up=UP,
-                                settings=TopologySettings(pair_height_scale=pair_height_scale))
-
-    by_height = stacked(TopologySettings().pair_height_scale)
-    assert {frozenset(far_ends(p)) for p in by_height.paths} == {
-        frozenset({end_of(0), end_of(150)}), frozenset({end_of(180), end_of(330)})}
-    assert not by_height.crossings
-    straightest = stacked(1e6)  # the height of a pair barely counts
-    assert {frozenset(far_ends(p)) for p in straightest.paths} == {
-        frozenset({end_of(0), end_of(180)}), frozenset({end_of(150), end_of(330)})}
-    with pytest.raises(ValueError):
-        TopologySettings(pair_height_scale=0.0)
-
-
 def test_the_search_window_weighs_the_other_pairings_but_never_chooses():
     # A shallow X: the straight pairing is likelier, the bent one not negligible. Weighing
     # nothing but the best (window 0) makes the crossing surer; the default window weighs the
