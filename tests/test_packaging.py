@@ -7,6 +7,7 @@ import subprocess
 import sys
 import tomllib
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -64,6 +65,38 @@ def _fake_wheel_cache(folder):
                 tags = [f"cp{v}-cp{v}-{tag}" for v in ("311", "313")]
             for wheel_tag in tags:
                 (folder / platform / f"{wheel_name}-{version}-{wheel_tag}.whl").write_bytes(b"")
+
+
+def test_one_zip_per_platform_with_its_wheels_for_every_python(tmp_path):
+    _fake_wheel_cache(tmp_path / "cache")
+    zips = package.build(list(package.PLATFORM_TAGS), tmp_path / "dist",
+                         cache=tmp_path / "cache", stage_root=tmp_path / "stage")
+    assert len(zips) == 3
+    names = {name for name, _ in package.runtime_requirements()}
+    assert "numpy" not in names
+    for path, platform in zip(zips, package.PLATFORM_TAGS):
+        with zipfile.ZipFile(path) as archive:
+            files = archive.namelist()
+            manifest = tomllib.loads(archive.read("blender_manifest.toml").decode())
+        wheels = [f for f in files if f.endswith(".whl")]
+        # scipy and pycolmap once per Python, OpenCV's abi3 wheel and networkx once
+        assert len(wheels) == 2 * len(names) - 2, wheels
+        for python in package.PYTHONS:
+            for name in names:
+                prefix = re.sub(r"[-_.]+", "_", name).lower() + "-"
+                served = [w for w in wheels if Path(w).name.startswith(prefix)
+                          and package.serves(w, python)]
+                assert len(served) == 1, (name, python, wheels)
+        marker = {"linux-x64": "manylinux", "macos-arm64": "macosx", "windows-x64": "win_amd64"}
+        for wheel in wheels:
+            assert marker[platform] in wheel or wheel.endswith("py3-none-any.whl"), wheel
+        generated = manifest["build"]["generated"]  # what Blender reads for a split build
+        assert generated["platforms"] == [platform]
+        assert sorted(generated["wheels"]) == sorted(f"./{w}" for w in wheels)
+        assert "__init__.py" in files and "addon/__init__.py" in files
+        assert "engine/result.py" in files
+        assert not [f for f in files if f.split("/")[0] in ("tests", "samples", "tools")]
+        assert not [f for f in files if "__pycache__" in f]
 
 
 def test_a_wheel_serves_the_pythons_blender_would_install_it_on():

@@ -2,9 +2,10 @@
 
 For each platform: download the runtime wheels (``requirements.txt``; numpy is never bundled,
 Blender ships its own) for each Python a supported Blender embeds (:data:`PYTHONS`: 3.11 for
-Blender 4.5 LTS and 5.0, 3.13 for 5.1 to 5.3) into a cache, stage the extension with those wheels written into its manifest, check it
-with ``blender_ext.py validate`` and build one zip per platform with ``blender_ext.py build
---split-platforms``. The builder and validator are the ones inside the installed ``bpy`` wheel.
+Blender 4.5 LTS and 5.0, 3.13 for 5.1 to 5.3) into a cache, stage the extension with those
+wheels written into its manifest, check it with ``blender_ext.py validate`` and build one zip
+per platform with ``blender_ext.py build --split-platforms``. The builder and validator are
+the ones inside the installed ``bpy`` wheel.
 
 Each zip carries the wheels of both Pythons; when the extension is enabled, Blender installs
 only those whose tags match its own Python (``_extensions_wheel_filter_for_this_system`` in
