@@ -7,11 +7,13 @@
 # requirements-dev*.txt. PYTHON313 and PYTHON311 name the interpreters if they are not found.
 
 comma := ,
-# The first of python$(1), pyenv's and Debian's python$(1) that runs and is that version (a
+# The first of python$(1), Debian's and pyenv's python$(1) that runs and is that version (a
 # pyenv shim of a version not selected is found but does not run).
-find_python = $(firstword $(foreach p,python$(1) $(wildcard $(or $(PYENV_ROOT),$(HOME)/.pyenv)/versions/$(1)*/bin/python$(1)) \
-  /usr/bin/python$(1),$(shell $(p) -c 'import sys; sys.version_info[:2] == ($(subst .,$(comma),$(1))) \
-  and print(sys.executable)' 2>/dev/null)))
+pythons_named = python$(1) /usr/bin/python$(1) \
+  $(wildcard $(or $(PYENV_ROOT),$(HOME)/.pyenv)/versions/$(1)*/bin/python$(1))
+find_python = $(firstword $(foreach p,$(call pythons_named,$(1)),$(shell $(p) -c \
+  'import sys; sys.version_info[:2] == ($(subst .,$(comma),$(1))) and print(sys.executable)' \
+  2>/dev/null)))
 PYTHON313 ?= $(call find_python,3.13)
 PYTHON311 ?= $(call find_python,3.11)
 VENV   := .venv
