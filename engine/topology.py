@@ -182,7 +182,9 @@ class TopologySettings:
     max_degree : int
         Junctions with more branches are paired greedily by bending.
     search_budget : int
-        Largest number of combinations of matchings the one-path search tries per cable.
+        Largest number of combinations of matchings the one-path search tries per cable (when
+        one makes the cable one path it comes early: by the 18th in every hard tuning heap;
+        the whole budget is spent only where none does).
     search_window : float
         Having found the most likely combination that makes each cable one path, the search
         weighs the others up to this many log-units less likely (each then weighs under
@@ -219,7 +221,7 @@ class TopologySettings:
     lift_width: float = 4.0
     confident: float = 0.9
     max_degree: int = 8
-    search_budget: int = 20000
+    search_budget: int = 2000
     search_window: float = 9.0
 
     def __post_init__(self):
