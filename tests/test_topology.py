@@ -275,9 +275,9 @@ def test_the_one_path_check_overrides_a_pairing_that_splits_the_cable():
 
 
 def test_the_search_window_weighs_the_other_pairings_but_never_chooses():
-    # A shallow X: the straight pairing is likelier, the bent one not negligible. Weighing
-    # nothing but the best (window 0) makes the crossing surer; the default window weighs the
-    # other pairing as an unbounded one does; the paths and the order never change.
+    # Four branches whose pairings are both plausible. Weighing nothing but the best
+    # (window 0) makes the crossing surer; the default window weighs the other pairing as an
+    # unbounded one does; the paths and the order never change.
     graph = crossing_graph([0, 30, 150, 180], [0.0, 0.5, 0.0, 0.5])
     runs = {window: resolve_topology(graph, [], radius=R, up=UP,
                                      settings=TopologySettings(search_window=window))
