@@ -368,20 +368,15 @@ def find_cables(images_rgb):
     hues = [_hue_of(hsv[best.mask])]
     reference = max(totals)
     labels = _nearest(_lab(small), best.centres)
-
-    def apart(hue):
-        return hue is not None and all(h is None or _hue_gap(h, hue) >= _HUE_APART
-                                       for h in hues)
-
     for total, candidate in sorted(zip(totals, candidates), key=lambda item: -item[0]):
         if total < _ANOTHER * reference:
             continue
         if taken & set(candidate.members):  # a found cable with another: keep the other
-            candidate = _other_part(candidate, taken, labels, hsv, apart)
+            candidate = _other_part(candidate, taken, labels, hsv, hues)
             if candidate is None:
                 continue
         hue = _hue_of(hsv[candidate.mask])
-        if not apart(hue):
+        if not _apart(hue, hues):
             continue
         found.append((range_of(hsv[candidate.mask]), candidate))
         taken |= set(candidate.members)
@@ -389,11 +384,17 @@ def find_cables(images_rgb):
     return found
 
 
-def _other_part(candidate, taken, labels, hsv, apart):
+def _apart(hue, hues):
+    """Whether ``hue`` (None: colourless) lies :data:`_HUE_APART` or more from each of
+    ``hues`` that has one."""
+    return hue is not None and all(h is None or _hue_gap(h, hue) >= _HUE_APART for h in hues)
+
+
+def _other_part(candidate, taken, labels, hsv, found_hues):
     """The clusters of a candidate that holds found clusters (``taken``) and others of a hue
-    of their own, as a candidate of their own, or None. Their own: ``apart`` from the found
-    cables' hues and from each found cluster's (a found candidate may hold two cables, and
-    its mean hue is then neither's).
+    of their own, as a candidate of their own, or None. Their own: :func:`_apart` from the
+    found cables' hues and from each found cluster's (a found candidate may hold two cables,
+    and its mean hue is then neither's).
 
     The greedy grouping of :func:`colour_candidates` adds a cluster only when it makes the
     group more cable-like, so a found cable's clusters grouped with another hue's are often
@@ -401,8 +402,8 @@ def _other_part(candidate, taken, labels, hsv, apart):
     the table's cluster). The other hue's pixels must be :data:`_PART` of the group's.
     """
     hues = {k: _hue_of(hsv[labels == k]) for k in taken | set(candidate.members)}
-    others = [k for k in candidate.members if k not in taken and apart(hues[k]) and all(
-        hues[t] is None or _hue_gap(hues[t], hues[k]) >= _HUE_APART for t in taken)]
+    against = list(found_hues) + [hues[k] for k in taken]
+    others = [k for k in candidate.members if k not in taken and _apart(hues[k], against)]
     mask = candidate.mask & np.isin(labels, others)
     if not others or mask.sum() < _PART * candidate.mask.sum():
         return None
