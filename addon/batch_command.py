@@ -11,12 +11,12 @@ from pathlib import Path
 
 import bpy
 
-from ..engine.bezier import BezierSettings
-from ..engine.cli import (EXIT_BAD_INPUT, ProgressBar, add_reconstruct_arguments,
-                          reconstruct_arguments, run_with_exit_code)
+from ..engine.cli.main import (EXIT_BAD_INPUT, ProgressBar, add_reconstruct_arguments,
+                               reconstruct_arguments, run_with_exit_code)
+from ..engine.cli.settings import add_settings_arguments, settings_from_arguments
 from ..engine.errors import InputError, OutputError
-from ..engine.files import check_output_file
-from ..engine.settings_cli import add_settings_arguments, settings_from_arguments
+from ..engine.io.files import check_output_file
+from ..engine.stages.bezier import BezierSettings
 from .reconstruction import RunRequest, apply_outcome, reconstruct_work, sequence_name
 
 __all__ = ["COMMAND", "handle_command", "build_parser"]

@@ -12,10 +12,10 @@ from pathlib import Path
 import bpy
 import cv2
 
-from ..engine.colmap_model import natural_key
 from ..engine.errors import InputError, ReconstructionError
-from ..engine.image_sequence import IMAGE_SUFFIXES, read_image
-from ..engine.mask_preview import mask_preview
+from ..engine.io.colmap import natural_key
+from ..engine.io.image_sequence import IMAGE_SUFFIXES, read_image
+from ..engine.stages.mask_preview import mask_preview
 
 __all__ = ["PREVIEW_IMAGE", "frame_paths", "frame_image", "refresh_preview", "show_preview"]
 

@@ -12,7 +12,7 @@ import bpy
 from bpy.props import CollectionProperty, IntProperty, StringProperty
 
 from ..engine.errors import Cancelled, InputError, ReconstructionError
-from ..engine.segmentation import auto_colour, colour_at
+from ..engine.stages.segmentation import auto_colour, colour_at
 from .background_job import CANCELLED, FAILED, FINISHED, RUNNING, BackgroundJob, ModalRun, \
     step_of
 from .mask_preview import PREVIEW_IMAGE, frame_image, refresh_preview, show_preview

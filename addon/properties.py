@@ -14,9 +14,9 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        FloatVectorProperty, IntProperty, IntVectorProperty, PointerProperty,
                        StringProperty)
 
-from ..engine.bezier import BezierSettings
 from ..engine.pipeline import PipelineSettings
-from ..engine.segmentation import ColourRange
+from ..engine.stages.bezier import BezierSettings
+from ..engine.stages.segmentation import ColourRange
 from .settings_properties import property_group_for, settings_from_group
 
 __all__ = ["CLASSES", "QUALITY_GROUPS", "register_properties", "unregister_properties",

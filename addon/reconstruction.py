@@ -16,11 +16,11 @@ from pathlib import Path
 
 import bpy
 
-from ..engine.bezier import BezierSettings, fit_result_curves
 from ..engine.errors import InputError
 from ..engine.pipeline import PipelineSettings, run_reconstruction
 from ..engine.progress import StageProgress
-from ..engine.segmentation import ColourRange
+from ..engine.stages.bezier import BezierSettings, fit_result_curves
+from ..engine.stages.segmentation import ColourRange
 from .mask_preview import frame_paths
 from .properties import colour_range, pipeline_settings
 from .scene_objects import (add_cable_materials, build_bezier_curve, build_cameras,

@@ -69,8 +69,8 @@ def build_bezier_curve(result, curves, name, collection):
     ----------
     result : engine.Result
         Gives the radius (the bevel's depth).
-    curves : sequence of engine.bezier.BezierCurve
-        One per path, from :func:`engine.bezier.fit_result_curves`.
+    curves : sequence of engine.stages.bezier.BezierCurve
+        One per path, from :func:`engine.stages.bezier.fit_result_curves`.
     name : str
     collection : bpy.types.Collection
 

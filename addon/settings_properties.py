@@ -7,7 +7,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, FloatProperty, IntProperty
 
-from ..engine.settings_cli import field_help
+from ..engine.cli.settings import field_help
 
 __all__ = ["property_group_for", "settings_from_group"]
 

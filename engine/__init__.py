@@ -4,31 +4,31 @@ Pure NumPy / SciPy / OpenCV / pycolmap / networkx; it never imports Blender, so 
 the command line (``python -m engine``), in a pipeline, or inside the Blender extension.
 """
 
-from .camera import CAMERA_MODELS, Camera
-from .colmap_model import ColmapModel, read_colmap_model, write_colmap_model
 from .errors import Cancelled, InputError, OutputError, ReconstructionError
-from .ground_truth import GroundTruth, TrueCrossing, read_ground_truth, write_ground_truth
-from .result import (RESULT_FORMAT, CablePath, Crossing, Result, StrandRef, read_result,
-                     write_result)
+from .geometry.camera import CAMERA_MODELS, Camera
+from .io.colmap import ColmapModel, read_colmap_model, write_colmap_model
+from .io.ground_truth import GroundTruth, TrueCrossing, read_ground_truth, write_ground_truth
+from .io.result import (RESULT_FORMAT, CablePath, Crossing, Result, StrandRef, read_result,
+                        write_result)
 
 __version__ = "0.1.0"
 
 #: Stage APIs, imported on first use (scipy, OpenCV and pycolmap are not needed to read a
-#: result): name -> module.
+#: result): name -> module. The metrics against a ground truth are developer code, in
+#: ``engine.evaluation`` (not in the extension).
 _LAZY = {
-    "Metrics": "metrics", "align_result_to_truth": "metrics", "evaluate": "metrics",
-    "SegmentationSettings": "segmentation", "segment_frame": "segmentation",
-    "auto_colour": "segmentation", "ColourRange": "segmentation",
-    "CameraEstimationSettings": "camera_estimation", "estimate_cameras": "camera_estimation",
-    "MaskAgreementSettings": "mask_agreement", "agree_masks": "mask_agreement",
-    "CarvingSettings": "carving", "VoxelGrid": "carving", "carve": "carving",
-    "SegmentGraphSettings": "segment_graph", "SegmentGraph": "segment_graph",
-    "extract_segment_graph": "segment_graph",
-    "extract_segment_graph_from_voxels": "segment_graph",
-    "RodSettings": "rod", "Rod": "rod", "solve_rod": "rod",
-    "RodFitSettings": "rod_fit", "RodFit": "rod_fit", "fit_rod": "rod_fit",
-    "ImageEvidence": "rod_fit", "Contact": "rod_fit", "Voxels": "rod_fit",
-    "TopologySettings": "topology", "resolve_topology": "topology",
+    "SegmentationSettings": "stages.segmentation", "segment_frame": "stages.segmentation",
+    "auto_colour": "stages.segmentation", "ColourRange": "stages.segmentation",
+    "CameraEstimationSettings": "stages.cameras", "estimate_cameras": "stages.cameras",
+    "MaskAgreementSettings": "stages.mask_agreement", "agree_masks": "stages.mask_agreement",
+    "CarvingSettings": "stages.carving", "VoxelGrid": "stages.carving", "carve": "stages.carving",
+    "SegmentGraphSettings": "stages.segment_graph", "SegmentGraph": "stages.segment_graph",
+    "extract_segment_graph": "stages.segment_graph",
+    "extract_segment_graph_from_voxels": "stages.segment_graph",
+    "RodSettings": "stages.rod", "Rod": "stages.rod", "solve_rod": "stages.rod",
+    "RodFitSettings": "stages.rod_fit", "RodFit": "stages.rod_fit", "fit_rod": "stages.rod_fit",
+    "ImageEvidence": "stages.rod_fit", "Contact": "stages.rod_fit", "Voxels": "stages.rod_fit",
+    "TopologySettings": "stages.topology", "resolve_topology": "stages.topology",
     "PipelineSettings": "pipeline", "Reconstruction": "pipeline", "reconstruct": "pipeline",
     "run_reconstruction": "pipeline",
 }

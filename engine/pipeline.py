@@ -1,11 +1,12 @@
 """The whole reconstruction: images to one continuous centreline per cable.
 
-Stages, each timed in the result (DESIGN.md's data flow)::
+Stages, each timed in the result (the README's data flow)::
 
     masks + junctions (§3.1)   segmented here, or read from a folder written by ``segment``
     cameras (§3.2)             a COLMAP model given as is, or estimated with pycolmap (upright)
     agreement                  masks segmented here checked against what the other views
-                               carve: strays removed, breaks filled (``engine.mask_agreement``)
+                               carve: strays removed, breaks filled
+                               (``engine.stages.mask_agreement``)
     carving (§3.2)             occupancy and junction voxels
     segment graph (§3.3)       junctions, ends and segments on the hull's core
     topology (§3.5)            which branch continues which, over/under, one path per cable
@@ -23,23 +24,23 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .camera_estimation import CameraEstimationSettings, estimate_cameras
-from .carving import CarvingSettings, carve
-from .colmap_model import read_colmap_model
 from .errors import InputError, ReconstructionError
-from .image_sequence import open_image_sequence, read_image
-from .mask_agreement import MaskAgreementSettings, agree_masks
-from .mask_checks import MaskCheckSettings, core_thickness, mask_warnings, unexplained_share
-from .metrics import Similarity
-from .packed_mask import PackedMask, unpacked
+from .geometry.similarity import Similarity
+from .geometry.upright import UprightSettings, make_upright
+from .io.colmap import read_colmap_model
+from .io.image_sequence import open_image_sequence, read_image
+from .io.packed_mask import PackedMask, unpacked
+from .io.result import CablePath, Crossing, Result, StrandRef
 from .progress import StageProgress, check_cancel
-from .result import CablePath, Crossing, Result, StrandRef
-from .rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
-from .segment_graph import SegmentGraphSettings, extract_segment_graph_from_voxels
-from .segmentation import (ColourRange, SegmentationSettings, cable_width, junction_map,
-                           reference_frames, segment_frame, sequence_colour)
-from .topology import TopologySettings, resolve_topology
-from .upright import UprightSettings, make_upright
+from .stages.cameras import CameraEstimationSettings, estimate_cameras
+from .stages.carving import CarvingSettings, carve
+from .stages.mask_agreement import MaskAgreementSettings, agree_masks
+from .stages.mask_checks import MaskCheckSettings, core_thickness, mask_warnings, unexplained_share
+from .stages.rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
+from .stages.segment_graph import SegmentGraphSettings, extract_segment_graph_from_voxels
+from .stages.segmentation import (ColourRange, SegmentationSettings, cable_width, junction_map,
+                                  reference_frames, segment_frame, sequence_colour)
+from .stages.topology import TopologySettings, resolve_topology
 
 __all__ = ["PipelineSettings", "View", "Reconstruction", "reconstruct", "run_reconstruction",
            "measure_radius", "read_masks", "cable_colour", "path_colours", "sequence_cameras"]

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from mathutils.geometry import interpolate_bezier
 
-from engine.bezier import BezierSettings, distance_to_polyline
-from engine.mask_preview import mask_preview
 from engine.pipeline import PipelineSettings, reconstruct
-from engine.segmentation import SegmentationSettings, auto_colour, segment_frame
-from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+from engine.stages.bezier import BezierSettings, distance_to_polyline
+from engine.stages.mask_preview import mask_preview
+from engine.stages.segmentation import SegmentationSettings, auto_colour, segment_frame
+from engine.synthetic.scene import SceneSpec, make_scene, write_scene
 
 
 @pytest.fixture(scope="module")
@@ -166,7 +166,7 @@ def test_running_again_replaces_the_result(empty_scene, capture):
 def test_flipping_a_crossing_swaps_it_and_refits(empty_scene, capture):
     # the add-on's own copy of the engine made the result, so it is checked with that copy
     from cable_reconstruction.engine import read_ground_truth
-    from cable_reconstruction.engine.metrics import evaluate
+    from cable_reconstruction.engine.evaluation.metrics import evaluate
 
     truth = read_ground_truth(capture / "ground_truth.json")
     configure(empty_scene, capture, with_cameras=False)

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from engine.bezier import _PieceFitter, _tangents, distance_to_polyline, fit_bezier, \
+from engine.stages.bezier import _PieceFitter, _tangents, distance_to_polyline, fit_bezier, \
     fit_result_curves
-from engine.result import CablePath, Crossing, Result, StrandRef
+from engine.io.result import CablePath, Crossing, Result, StrandRef
 
 
 def wavy(n=1200, turns=3.0):

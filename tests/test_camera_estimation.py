@@ -10,12 +10,13 @@ import pytest
 
 from conftest import look_at_camera
 from engine import Cancelled, InputError, ReconstructionError, read_colmap_model
-from engine.camera_estimation import (CameraEstimate, CameraEstimationSettings,
-                                      cameras_command, compare_to_truth, estimate_cameras)
-from engine.ground_truth import read_ground_truth
-from engine.metrics import Similarity, align_similarity
-from engine.synthetic_scene import SceneSpec, make_scene, write_scene
-from engine.upright import UprightSettings, fit_plane, look_at_point, make_upright
+from engine.cli.cameras import cameras_command
+from engine.evaluation.cameras import compare_to_truth
+from engine.geometry.similarity import Similarity, align_similarity
+from engine.geometry.upright import UprightSettings, fit_plane, look_at_point, make_upright
+from engine.io.ground_truth import read_ground_truth
+from engine.stages.cameras import CameraEstimate, CameraEstimationSettings, estimate_cameras
+from engine.synthetic.scene import SceneSpec, make_scene, write_scene
 
 VIEWS, WIDTH, HEIGHT = 12, 640, 480
 

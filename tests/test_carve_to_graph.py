@@ -2,11 +2,11 @@
 
 import pytest
 
-from engine.carving import CarvingSettings, carve
-from engine.carving_benchmark import graph_scores
-from engine.segment_graph import extract_segment_graph_from_voxels
-from engine.segmentation import cable_width, junction_map
-from engine.synthetic_scene import SceneSpec, make_scene
+from engine.bench.carve import graph_scores
+from engine.stages.carving import CarvingSettings, carve
+from engine.stages.segment_graph import extract_segment_graph_from_voxels
+from engine.stages.segmentation import cable_width, junction_map
+from engine.synthetic.scene import SceneSpec, make_scene
 
 
 def _graph(spec):
@@ -33,7 +33,7 @@ def test_every_crossing_is_one_junction_of_four_branches(spec):
 
 
 def test_bench_carve_carves_as_a_user_and_labels_the_truth_fed_grid(tmp_path):
-    from engine.carving_benchmark import _scene_rows
+    from engine.bench.carve import _scene_rows
 
     spec = SceneSpec(crossings=2, seed=3, views=12, width=640, height=480)
     ours, oracle = _scene_rows([("table 2", spec)], CarvingSettings(), tmp_path, 128)

@@ -8,9 +8,9 @@ import pytest
 from scipy.spatial import cKDTree
 
 from engine import Cancelled
-from engine.carving import CarvingSettings, carve, scene_region
-from engine.segmentation import cable_width, junction_map
-from engine.synthetic_scene import SceneSpec, make_scene
+from engine.stages.carving import CarvingSettings, carve, scene_region
+from engine.stages.segmentation import cable_width, junction_map
+from engine.synthetic.scene import SceneSpec, make_scene
 
 
 @pytest.fixture(scope="module")
@@ -145,7 +145,7 @@ def test_masks_that_take_in_everything_stop_at_the_memory_budget(scene):
 
 
 def test_past_the_budget_the_carve_is_coarser_and_says_so(scene):
-    from engine.carving import _CORE_BYTES, _VOXEL_BYTES
+    from engine.stages.carving import _CORE_BYTES, _VOXEL_BYTES
 
     scene, _ = scene
     r = scene.truth.radius
@@ -164,7 +164,7 @@ def test_past_the_budget_the_carve_is_coarser_and_says_so(scene):
 
 
 def test_a_packed_mask_gives_back_the_mask_in_an_eighth_of_the_memory():
-    from engine.packed_mask import PackedMask, unpacked
+    from engine.io.packed_mask import PackedMask, unpacked
 
     rng = np.random.default_rng(0)
     for shape in [(7, 13), (480, 640), (1, 1)]:
@@ -185,7 +185,7 @@ def test_a_packed_mask_gives_back_the_mask_in_an_eighth_of_the_memory():
 
 
 def test_a_stretch_out_of_most_frames_is_carved_from_the_views_that_frame_it():
-    from engine.synthetic_cameras import out_of_frame
+    from engine.synthetic.cameras import out_of_frame
 
     scene = make_scene(SceneSpec(crossings=2, seed=4, views=16, width=640, height=480,
                                  framing=0.5))

@@ -38,8 +38,8 @@ def test_a_bug_is_one_line_naming_where_with_the_traceback_in_a_file():
     import numpy as np
     import pytest
 
-    from engine.carving import carve
-    from engine.cli import EXIT_BUG, run_with_exit_code
+    from engine.cli.main import EXIT_BUG, run_with_exit_code
+    from engine.stages.carving import carve
 
     not_a_camera = object()
     stream = io.StringIO()
@@ -80,7 +80,7 @@ def test_a_full_disk_leaves_nothing_behind(tmp_path, monkeypatch):
     import pytest
 
     from engine.errors import OutputError
-    from engine.files import write_atomic, write_image
+    from engine.io.files import write_atomic, write_image
 
     def full(fd):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
@@ -105,13 +105,13 @@ def test_bench_families_are_checked_before_the_work():
 
 @pytest.mark.parametrize("stage", ["looks", "pipeline-looks"])
 def test_bench_families_reach_the_bench(monkeypatch, capsys, stage):
-    import engine.look_benchmark
-    import engine.pipeline_benchmark
-    from engine.cli import main
+    import engine.bench.looks
+    import engine.bench.pipeline
+    from engine.cli.main import main
 
     calls = []
-    for module, name in ((engine.look_benchmark, "bench_looks"),
-                         (engine.pipeline_benchmark, "bench_pipeline_looks")):
+    for module, name in ((engine.bench.looks, "bench_looks"),
+                         (engine.bench.pipeline, "bench_pipeline_looks")):
         signature = inspect.signature(getattr(module, name))
 
         def fake(*args, _signature=signature, **kwargs):

@@ -1,4 +1,4 @@
-"""The automatic choice of the cable and its colour model (engine.colour_model)."""
+"""The automatic choice of the cable and its colour model (engine.stages.colour_model)."""
 
 from pathlib import Path
 
@@ -6,12 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
-from engine.colour_model import _SPACES, ColourModel, find_cable, thin_pieces
+from engine.bench.looks import naive_mask
 from engine.errors import ReconstructionError
-from engine.image_sequence import read_image
-from engine.look_benchmark import naive_mask
-from engine.segmentation import reference_frames, segment_frame, sequence_colour
-from engine.synthetic_scene import look_scene
+from engine.io.image_sequence import read_image
+from engine.stages.colour_model import _SPACES, ColourModel, find_cable, thin_pieces
+from engine.stages.segmentation import reference_frames, segment_frame, sequence_colour
+from engine.synthetic.scene import look_scene
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real" / "mbest-s1"
 
@@ -183,7 +183,7 @@ def _cable_with_shadow(seed, *, table=(185, 150, 195), cable_colour=(22, 22, 26)
 def test_a_dark_cable_s_soft_shadow_is_not_cable():
     """A black cable's soft shadow is dark too: the table darkened, of its chromaticity,
     leaves the mask; the cable stays whole."""
-    from engine.segmentation import SegmentationSettings, _without_shadow
+    from engine.stages.segmentation import SegmentationSettings, _without_shadow
 
     for seed in range(3):
         image, cable, dark = _cable_with_shadow(seed)
@@ -195,7 +195,7 @@ def test_a_dark_cable_s_soft_shadow_is_not_cable():
 def test_a_rendered_black_cable_s_shadow_leaves_its_masks():
     """A black cable on a lilac table (a tuning scene of the neutral looks): the colour model
     takes its soft shadow in, and the masks lose most of it."""
-    from engine.segmentation import SegmentationSettings
+    from engine.stages.segmentation import SegmentationSettings
 
     scene = look_scene("neutral", 6, views=3, width=960, height=720)
     colour, model = sequence_colour(list(scene.images))
@@ -212,7 +212,7 @@ def test_a_rendered_black_cable_s_shadow_leaves_its_masks():
     ((150, 150, 150), (200, 40, 30), 0.4),  # a red cable's own shade side is not the table's
 ], ids=["grey on grey", "red shade side"])
 def test_a_cable_like_a_shadow_keeps_every_pixel(table, cable_colour, shadow):
-    from engine.segmentation import SegmentationSettings, _without_shadow
+    from engine.stages.segmentation import SegmentationSettings, _without_shadow
 
     image, cable, dark = _cable_with_shadow(0, table=table, cable_colour=cable_colour,
                                             shadow=shadow)
@@ -224,7 +224,7 @@ def test_a_cable_like_a_shadow_keeps_every_pixel(table, cable_colour, shadow):
 
 
 def test_a_model_learnt_from_given_masks_segments_the_other_frames():
-    from engine.segmentation import colour_from_masks
+    from engine.stages.segmentation import colour_from_masks
 
     scene = look_scene("saturated", 0, views=4, width=640, height=480)
     images, truths = list(scene.images), list(scene.masks)
@@ -248,8 +248,8 @@ def test_a_model_learnt_from_given_masks_segments_the_other_frames():
 def test_the_looks_bench_s_oracle_seed_is_labelled_and_only_where_it_applies():
     from dataclasses import replace
 
-    from engine.look_benchmark import _oracle_mean, score_sequence
-    from engine.segmentation import SegmentationSettings
+    from engine.bench.looks import _oracle_mean, score_sequence
+    from engine.stages.segmentation import SegmentationSettings
 
     scene = look_scene("saturated", 0, views=4, width=640, height=480)
     images, truths = list(scene.images), list(scene.masks)

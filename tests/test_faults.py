@@ -2,7 +2,7 @@
 `python -m engine reconstruct` ends with its documented exit code and a one-line message,
 never a traceback, and changes nothing it should not."""
 
-from engine.fault_benchmark import FAULTS, bench_faults
+from engine.bench.faults import FAULTS, bench_faults
 
 
 def test_every_fault_ends_as_documented():

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from engine import InputError
-from engine.image_sequence import open_image_sequence, read_image
-from engine.segmentation import (ColourRange, SegmentationSettings, auto_colour, cable_mask,
-                                 cable_width, colour_at, junction_map, refine_edges,
-                                 segment_frame)
-from engine.synthetic_scene import SceneSpec, make_scene
+from engine.io.image_sequence import open_image_sequence, read_image
+from engine.stages.segmentation import (ColourRange, SegmentationSettings, auto_colour, cable_mask,
+                                        cable_width, colour_at, junction_map, refine_edges,
+                                        segment_frame)
+from engine.synthetic.scene import SceneSpec, make_scene
 
 
 def iou(a, b):
@@ -101,8 +101,8 @@ def test_a_truncated_jpeg_is_named_at_input_checking(tmp_path, scene, progressiv
 def test_exif_rotated_photos_are_read_in_their_stored_grid(tmp_path, scene):
     """A phone's portrait photo is stored landscape with an EXIF orientation; pycolmap reads
     the stored grid, so the masks must too (OpenCV would rotate it by default)."""
-    from engine.fault_benchmark import with_exif_orientation
-    from engine.image_sequence import read_image
+    from engine.bench.faults import with_exif_orientation
+    from engine.io.image_sequence import read_image
 
     folder = write_frames(tmp_path / "f", scene.images[:2])
     for path in folder.iterdir():

@@ -9,14 +9,14 @@ import cv2
 import numpy as np
 import pytest
 
-from engine.synthetic_cameras import orbit_cameras
-from engine.synthetic_layouts import table_layout
-from engine.synthetic_looks import (DEFAULT_LOOK, LOOK_FAMILIES, TABLE_KINDS, ClutterObject, Look,
+from engine.synthetic.cameras import orbit_cameras
+from engine.synthetic.layouts import table_layout
+from engine.synthetic.looks import (DEFAULT_LOOK, LOOK_FAMILIES, TABLE_KINDS, ClutterObject, Look,
                                     sample_look, with_camera_effects_off)
-from engine.synthetic_render import (CLUTTER_CLEARANCE, jpeg_round_trip, place_clutter,
+from engine.synthetic.render import (CLUTTER_CLEARANCE, jpeg_round_trip, place_clutter,
                                      render_masks, render_views)
-from engine.synthetic_scene import look_spec, make_scene, read_look, write_scene
-from engine.synthetic_textures import legacy_wood_texture, table_texture
+from engine.synthetic.scene import look_spec, make_scene, read_look, write_scene
+from engine.synthetic.textures import legacy_wood_texture, table_texture
 
 TEXTURE = 512  # small textures keep the tests fast
 

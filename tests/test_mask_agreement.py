@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from engine import Cancelled
-from engine.camera import Camera
-from engine.mask_agreement import MaskAgreementSettings, agree_masks
-from engine.segmentation import auto_colour, cable_width, junction_map, segment_frame
-from engine.synthetic_scene import SceneSpec, make_scene
+from engine.geometry.camera import Camera
+from engine.stages.mask_agreement import MaskAgreementSettings, agree_masks
+from engine.stages.segmentation import auto_colour, cable_width, junction_map, segment_frame
+from engine.synthetic.scene import SceneSpec, make_scene
 
 
 @pytest.fixture(scope="module")
@@ -272,7 +272,7 @@ def test_inputs_settings_progress_and_cancel(scene, exact):
 
 
 def test_settings_are_documented_prefixed_command_line_flags():
-    from engine.cli import build_parser, reconstruct_arguments
+    from engine.cli.main import build_parser, reconstruct_arguments
 
     parser = build_parser()
     for command in ("segment", "reconstruct"):

@@ -1,4 +1,4 @@
-"""The checks that warn when the masks held more than the cable (`engine/mask_checks.py`)."""
+"""The checks that warn when the masks held more than the cable (`engine/stages/mask_checks.py`)."""
 
 import math
 from types import SimpleNamespace
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from conftest import look_at_camera
-from engine.mask_checks import (MaskCheckSettings, core_thickness, mask_warnings,
-                                unexplained_share)
-from engine.packed_mask import PackedMask
+from engine.io.packed_mask import PackedMask
+from engine.stages.mask_checks import (MaskCheckSettings, core_thickness, mask_warnings,
+                                       unexplained_share)
 
 RADIUS = 0.005
 

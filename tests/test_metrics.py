@@ -1,4 +1,5 @@
-"""engine.metrics on small analytic ground truths: a looping cable on a table and a closed ring."""
+"""engine.evaluation.metrics on small analytic ground truths: a looping cable on a table and a
+closed ring."""
 
 
 import numpy as np
@@ -7,9 +8,9 @@ from scipy.optimize import brentq
 
 from conftest import look_at_camera
 from engine import CablePath, Crossing, Result, StrandRef
-from engine.ground_truth import GroundTruth, TrueCrossing
-from engine.metrics import (Metrics, MetricSettings, Similarity, align_result_to_truth,
-                            align_similarity, evaluate)
+from engine.evaluation.metrics import Metrics, MetricSettings, align_result_to_truth, evaluate
+from engine.geometry.similarity import Similarity, align_similarity
+from engine.io.ground_truth import GroundTruth, TrueCrossing
 
 R = 0.01       # the true radius; the shapes below are built in units of R and scaled
 SPACING = 0.25  # truth sample spacing, in R

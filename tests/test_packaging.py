@@ -15,10 +15,10 @@ import pytest
 import package  # tools/package.py
 from conftest import ROOT
 from engine import __version__, read_result, write_result
-from engine.bezier import fit_result_curves
-from engine.ground_truth import read_ground_truth
+from engine.io.ground_truth import read_ground_truth
 from engine.pipeline import reconstruct
-from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+from engine.stages.bezier import fit_result_curves
+from engine.synthetic.scene import SceneSpec, make_scene, write_scene
 
 MANIFEST = tomllib.loads((ROOT / "blender_manifest.toml").read_text())
 
@@ -67,6 +67,10 @@ def _fake_wheel_cache(folder):
                 (folder / platform / f"{wheel_name}-{version}-{wheel_tag}.whl").write_bytes(b"")
 
 
+#: Developer code that never ships in the extension.
+DEVELOPER_PACKAGES = [["engine", name] for name in ("synthetic", "evaluation", "bench")]
+
+
 def test_one_zip_per_platform_with_its_wheels_for_every_python(tmp_path):
     _fake_wheel_cache(tmp_path / "cache")
     zips = package.build(list(package.PLATFORM_TAGS), tmp_path / "dist",
@@ -94,8 +98,11 @@ def test_one_zip_per_platform_with_its_wheels_for_every_python(tmp_path):
         assert generated["platforms"] == [platform]
         assert sorted(generated["wheels"]) == sorted(f"./{w}" for w in wheels)
         assert "__init__.py" in files and "addon/__init__.py" in files
-        assert "engine/result.py" in files
+        assert "engine/io/result.py" in files
         assert not [f for f in files if f.split("/")[0] in ("tests", "samples", "tools")]
+        # the developer packages stay out; the installer test below runs without them
+        assert "engine/stages/topology.py" in files and "engine/cli/main.py" in files
+        assert not [f for f in files if f.split("/")[:2] in DEVELOPER_PACKAGES], files
         assert not [f for f in files if "__pycache__" in f]
 
 

@@ -11,11 +11,11 @@ import pytest
 
 from conftest import ROOT
 from engine import Cancelled, InputError, read_result
-from engine.metrics import evaluate
-from engine.obj_export import tube_mesh, write_obj
-from engine.overlay import draw_overlay
+from engine.evaluation.metrics import evaluate
+from engine.io.obj import tube_mesh, write_obj
+from engine.io.overlay import draw_overlay
 from engine.pipeline import reconstruct, run_reconstruction
-from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+from engine.synthetic.scene import SceneSpec, make_scene, write_scene
 
 
 @pytest.fixture(scope="module")
@@ -246,7 +246,7 @@ def test_radius_from_the_width_in_the_images(bend, radius):
     # transform's median less a quarter pixel, was 4 to 7% short here)
     from pathlib import Path
 
-    from engine.camera import Camera
+    from engine.geometry.camera import Camera
     from engine.pipeline import View, measure_radius
     focal, height, arc = 800.0, 0.5, 0.2
     camera = Camera(name="a.png", width=400, height=300, model="PINHOLE",

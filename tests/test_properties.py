@@ -11,10 +11,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from engine import InputError
-from engine.camera import Camera
-from engine.cli import main
-from engine.colmap_model import read_colmap_model, write_colmap_model
-from engine.result import CablePath, Crossing, Result, StrandRef, read_result, result_from_dict
+from engine.cli.main import main
+from engine.geometry.camera import Camera
+from engine.io.colmap import read_colmap_model, write_colmap_model
+from engine.io.result import CablePath, Crossing, Result, StrandRef, read_result, result_from_dict
 
 #: Any JSON value.
 JSON = st.recursive(

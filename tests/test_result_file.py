@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine import InputError, read_result, write_result
-from engine.result import RESULT_FORMAT
+from engine.io.result import RESULT_FORMAT
 
 
 def test_round_trip_keeps_everything(small_result, tmp_path):

@@ -1,4 +1,5 @@
-"""engine.rod: discrete elastic rods against beam theory, exact derivatives and robustness."""
+"""engine.stages.rod: discrete elastic rods against beam theory, exact derivatives and
+robustness."""
 
 import threading
 
@@ -8,7 +9,7 @@ import pytest
 from conftest import finite_gradient
 
 from engine.errors import Cancelled
-from engine.rod import Derivatives, ElasticEnergy, EndMoment, Rod, RodSettings, solve_rod
+from engine.stages.rod import Derivatives, ElasticEnergy, EndMoment, Rod, RodSettings, solve_rod
 
 
 def straight_rod(count, spacing, radius, **ends):

@@ -1,4 +1,5 @@
-"""engine.rod_fit: rods fitted to voxels, masks and crossings of small ground-truth scenes."""
+"""engine.stages.rod_fit: rods fitted to voxels, masks and crossings of small ground-truth
+scenes."""
 
 import threading
 
@@ -10,16 +11,16 @@ from scipy.spatial import cKDTree
 
 from conftest import finite_gradient, look_at_camera
 from engine import CablePath, Result
-from engine.camera import Camera
-from engine.carving import CarvingSettings, carve
+from engine.bench.rod import carve_stretch, noisy_chain, scene_masks
 from engine.errors import Cancelled
-from engine.metrics import evaluate
-from engine.rod_benchmark import carve_stretch, noisy_chain, scene_masks
-from engine.rod_fit import (Contact, ContactPenalty, ImageAttraction, ImageEvidence, Obstacle,
-                            ObstaclePenalty, RodFitSettings,
-                            Springs, Voxels, fit_rod, resample_polyline, voxel_attraction)
-from engine.segmentation import cable_width, junction_map
-from engine.synthetic_scene import SceneSpec
+from engine.evaluation.metrics import evaluate
+from engine.geometry.camera import Camera
+from engine.stages.carving import CarvingSettings, carve
+from engine.stages.rod_fit import (Contact, ContactPenalty, ImageAttraction, ImageEvidence,
+                                   Obstacle, ObstaclePenalty, RodFitSettings, Springs, Voxels,
+                                   fit_rod, resample_polyline, voxel_attraction)
+from engine.stages.segmentation import cable_width, junction_map
+from engine.synthetic.scene import SceneSpec
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ import numpy as np
 
 from conftest import ROOT
 from engine import read_colmap_model
-from engine.ground_truth import read_ground_truth
-from engine.synthetic_cameras import cable_pixel_width
+from engine.io.ground_truth import read_ground_truth
+from engine.synthetic.cameras import cable_pixel_width
 
 SAMPLE = ROOT / "samples" / "sequence"
 

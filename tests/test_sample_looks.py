@@ -14,10 +14,10 @@ import pytest
 
 from conftest import ROOT
 from engine import read_colmap_model
-from engine.ground_truth import read_ground_truth
-from engine.synthetic_cameras import cable_pixel_width, out_of_frame
-from engine.synthetic_layouts import hard_layout, table_layout
-from engine.synthetic_looks import HELD_OUT_SEEDS, sample_look
+from engine.io.ground_truth import read_ground_truth
+from engine.synthetic.cameras import cable_pixel_width, out_of_frame
+from engine.synthetic.layouts import hard_layout, table_layout
+from engine.synthetic.looks import HELD_OUT_SEEDS, sample_look
 
 LOOKS = ROOT / "samples" / "looks"
 HARD = ROOT / "samples" / "hard"

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from engine.benchmarks import format_table, junction_scores
-from engine.synthetic_scene import SceneSpec, make_scene, write_scene
+from engine.bench.common import format_table
+from engine.bench.segment import junction_scores
+from engine.synthetic.scene import SceneSpec, make_scene, write_scene
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +137,7 @@ def test_format_table():
 
 
 def test_segment_all_cables_writes_every_cable(tmp_path):
-    from engine.synthetic_scene import look_scene
+    from engine.synthetic.scene import look_scene
 
     scene = look_scene("two_cables", 3, views=6, width=640, height=480)
     folder = write_scene(scene, tmp_path / "pair")

@@ -8,10 +8,10 @@ import networkx as nx
 import numpy as np
 import pytest
 
+from engine.cli.settings import add_settings_arguments, settings_from_arguments
 from engine.errors import Cancelled
-from engine.segment_graph import (SegmentGraph, SegmentGraphSettings, extract_segment_graph,
-                                  extract_segment_graph_from_voxels, voxelize_tubes)
-from engine.settings_cli import add_settings_arguments, settings_from_arguments
+from engine.stages.segment_graph import (SegmentGraph, SegmentGraphSettings, extract_segment_graph,
+                                         extract_segment_graph_from_voxels, voxelize_tubes)
 
 R = 2.5  # cable radius in voxels (voxel size 1): five voxels across
 

@@ -7,14 +7,14 @@ import cv2
 import numpy as np
 import pytest
 
-from engine.ground_truth import GroundTruth, TrueCrossing, read_ground_truth
-from engine.metrics import evaluate
+from engine.evaluation.metrics import evaluate
+from engine.io.ground_truth import GroundTruth, TrueCrossing, read_ground_truth
+from engine.io.result import CablePath, Result
 from engine.pipeline import PipelineSettings, run_reconstruction
-from engine.result import CablePath, Result
-from engine.segmentation import (SegmentationSettings, SeveralCables, _joined,
-                                 reference_frames, segment_frame, sequence_colour)
-from engine.synthetic_layouts import find_crossings_2d, pair_layout
-from engine.synthetic_scene import look_scene, look_spec, make_scene, write_scene
+from engine.stages.segmentation import (SegmentationSettings, SeveralCables, _joined,
+                                        reference_frames, segment_frame, sequence_colour)
+from engine.synthetic.layouts import find_crossings_2d, pair_layout
+from engine.synthetic.scene import look_scene, look_spec, make_scene, write_scene
 
 
 def iou(a, b):

@@ -4,8 +4,8 @@ import cv2
 import numpy as np
 import pytest
 
-from engine.segmentation import cable_width, junction_centres, junction_map
-from engine.skeleton_2d import fill_small_holes, skeleton_clusters, thin
+from engine.stages.segmentation import cable_width, junction_centres, junction_map
+from engine.stages.skeleton_2d import fill_small_holes, skeleton_clusters, thin
 
 
 def _draw(size, lines, width):

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from engine.sparse_voxels import NEIGHBOUR_STEPS, neighbours, pieces, sorted_voxels
+from engine.stages.sparse_voxels import NEIGHBOUR_STEPS, neighbours, pieces, sorted_voxels
 
 
 def _random_voxels(seed, shape=(9, 11, 7), fill=0.3):
@@ -59,7 +59,7 @@ def test_bad_input():
 
 
 def test_keys_follow_c_order_and_tell_voxels_apart():
-    from engine.sparse_voxels import keys
+    from engine.stages.sparse_voxels import keys
 
     _, index = _random_voxels(3)
     found = keys(index)

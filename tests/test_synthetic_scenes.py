@@ -9,15 +9,15 @@ import pytest
 from scipy.spatial import cKDTree
 
 from engine import read_colmap_model
-from engine.ground_truth import read_ground_truth
-from engine.metrics import evaluate
-from engine.result import CablePath, Result
-from engine.synthetic_cameras import (cable_pixel_width, handheld_cameras, orbit_cameras,
+from engine.evaluation.metrics import evaluate
+from engine.io.ground_truth import read_ground_truth
+from engine.io.result import CablePath, Result
+from engine.synthetic.cameras import (cable_pixel_width, handheld_cameras, orbit_cameras,
                                       out_of_frame)
-from engine.synthetic_layouts import (HARD_SETTINGS, LayoutSettings, find_crossings_2d,
+from engine.synthetic.layouts import (HARD_SETTINGS, LayoutSettings, find_crossings_2d,
                                       hanging_layout, hard_layout, knot_layout, table_layout)
-from engine.synthetic_render import render_masks
-from engine.synthetic_scene import (HARD_FRAMING, SceneSpec, hard_spec, make_scene,
+from engine.synthetic.render import render_masks
+from engine.synthetic.scene import (HARD_FRAMING, SceneSpec, hard_spec, make_scene,
                                     render_scene_to, write_scene)
 
 RULES = LayoutSettings()
@@ -105,7 +105,7 @@ def test_hard_layouts_are_heaps_within_their_own_rules():
 
 
 def test_a_strand_passes_over_one_and_under_the_next_close_by():
-    from engine.synthetic_layouts import SAMPLE_SPACING, _arc_resample, _stacked_lift
+    from engine.synthetic.layouts import SAMPLE_SPACING, _arc_resample, _stacked_lift
 
     # two strands 3 r apart (x = -1.5 up, x = 1.5 down), then along y = 0 back across both:
     # the last stretch passes over the strand at x = 1.5 and under the one at x = -1.5, so
@@ -129,7 +129,7 @@ def test_a_strand_passes_over_one_and_under_the_next_close_by():
 
 
 def test_strands_closer_than_the_clearance_are_pushed_apart():
-    from engine.synthetic_layouts import SAMPLE_SPACING, _arc_resample, _pushed_apart
+    from engine.synthetic.layouts import SAMPLE_SPACING, _arc_resample, _pushed_apart
 
     # a hairpin whose two legs lie 1 r apart: pushed to the clearance, no crossing made
     corners = np.array([[0, -0.5], [40, -0.5], [40, 0.5], [0, 0.5]], dtype=float)

@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, look_at_camera
-from engine.carving import CarvingSettings, carve
-from engine.colmap_model import read_colmap_model
-from engine.ground_truth import read_ground_truth
-from engine.image_sequence import read_image
+from engine.cli.settings import field_help
 from engine.errors import Cancelled, ReconstructionError
-from engine.metrics import evaluate
-from engine.segment_graph import SegmentGraph, extract_segment_graph_from_voxels
-from engine.segmentation import reference_frames, segment_frame, sequence_colour
-from engine.settings_cli import field_help
-from engine.synthetic_scene import SceneSpec, make_scene
-from engine.topology import (Topology, TopologySettings, TopologyView, resolve_topology)
+from engine.evaluation.metrics import evaluate
+from engine.io.colmap import read_colmap_model
+from engine.io.ground_truth import read_ground_truth
+from engine.io.image_sequence import read_image
+from engine.stages.carving import CarvingSettings, carve
+from engine.stages.segment_graph import SegmentGraph, extract_segment_graph_from_voxels
+from engine.stages.segmentation import reference_frames, segment_frame, sequence_colour
+from engine.stages.topology import (Topology, TopologySettings, TopologyView, resolve_topology)
+from engine.synthetic.scene import SceneSpec, make_scene
 
 R = 1.0          # cable radius of the hand-made graphs (world units)
 UP = np.array([0.0, 0.0, 1.0])
@@ -379,7 +379,7 @@ def test_the_image_cue_alone_decides_and_follows_the_drawing(over_angle, under_a
 
 
 def test_a_large_view_is_read_reduced_and_says_the_same():
-    from engine.topology import TopologySettings
+    from engine.stages.topology import TopologySettings
 
     camera = look_at_camera("top.png", [0.0, 0.0, 40.0], [0.0, 0.0, 0.0], width=400, height=400,
                             params=[800.0, 800.0, 200.0, 200.0])

@@ -4,10 +4,10 @@ import inspect
 
 import pytest
 
-from engine.synthetic_scene import HARD_FRAMING, SceneSpec, make_scene, write_scene
-from engine.topology_benchmark import (CAPTURE_FAMILY, SCENE_COLUMNS, SUMMARY_COLUMNS,
-                                       TOPOLOGY_FAMILIES, _summary, bench_topology,
-                                       topology_spec)
+from engine.bench.topology import (CAPTURE_FAMILY, SCENE_COLUMNS, SUMMARY_COLUMNS,
+                                   TOPOLOGY_FAMILIES, _summary, bench_topology,
+                                   topology_spec)
+from engine.synthetic.scene import HARD_FRAMING, SceneSpec, make_scene, write_scene
 
 
 def test_the_families_are_the_easy_layouts_and_the_partly_framed_heaps():
@@ -47,10 +47,10 @@ def test_a_summary_counts_scenes_crossings_and_doubt():
 
 
 def test_the_command_line_gives_the_bench_its_families(monkeypatch, capsys):
-    import engine.topology_benchmark
-    from engine.cli import main
+    import engine.bench.topology
+    from engine.cli.main import main
 
-    signature = inspect.signature(engine.topology_benchmark.bench_topology)
+    signature = inspect.signature(engine.bench.topology.bench_topology)
     calls = []
 
     def fake(*args, **kwargs):
@@ -59,7 +59,7 @@ def test_the_command_line_gives_the_bench_its_families(monkeypatch, capsys):
         return ([{"family": "hard", "set": "tuning", "masks": "ours", "scenes": 1}],
                 [{"family": "hard", "seed": 0, "error": "scene: no layout"}])
 
-    monkeypatch.setattr(engine.topology_benchmark, "bench_topology", fake)
+    monkeypatch.setattr(engine.bench.topology, "bench_topology", fake)
     assert main(["-q", "bench", "topology", "--families", "hard", "--seeds", "2"]) == 0
     assert calls[-1]["families"] == ("hard",) and calls[-1]["seeds"] == 2
     assert calls[-1]["captures"] is None  # chosen families only

@@ -42,9 +42,9 @@ def main():
     from cable_reconstruction.addon.batch_command import handle_command
     from cable_reconstruction.addon.reconstruction import sessions
     from cable_reconstruction.engine import CablePath, evaluate, read_ground_truth, write_result
-    from cable_reconstruction.engine.bezier import fit_result_curves
-    from cable_reconstruction.engine.image_sequence import read_image
-    from cable_reconstruction.engine.overlay import draw_overlay
+    from cable_reconstruction.engine.stages.bezier import fit_result_curves
+    from cable_reconstruction.engine.io.image_sequence import read_image
+    from cable_reconstruction.engine.io.overlay import draw_overlay
 
     bpy.ops.wm.read_homefile(use_empty=True)
     blend = output / "sample.blend"

@@ -1,7 +1,7 @@
 """Render a realistic sample sequence with Blender's Cycles (CPU): `make sample`.
 
 A seeded table layout, or a hard one (a heap of crossings close together, each view framing part
-of it: `--layout hard`; engine.synthetic_layouts), is built in Blender as a bevelled curve on a
+of it: `--layout hard`; engine.synthetic.layouts), is built in Blender as a bevelled curve on a
 textured table (the engine's table texture, so structure-from-motion has features), lit by a
 sun and a sky, and rendered from hand-held-like cameras. Written next to the JPEG frames: the
 exact cable masks (ray-cast by the engine from the same geometry), a COLMAP text model of the
@@ -11,8 +11,8 @@ with denoising takes 8.7 s on one thread and 4.4 s on two (`--threads`) on this 
 quiet two-core machine, 10-38 s on one thread while other jobs share the cores (`--threads 1`
 leaves one core to them); 960x720 at 32 samples, 15-60 s.
 
-The scene follows a seeded *look* (engine.synthetic_looks): the cable's colour, stripes or two
-tones and gloss; the table texture (engine.synthetic_textures at 2048 pixels, as the fast
+The scene follows a seeded *look* (engine.synthetic.looks): the cable's colour, stripes or two
+tones and gloss; the table texture (engine.synthetic.textures at 2048 pixels, as the fast
 renderer draws it: some kinds change with the texture's size);
 a soft or hard, tinted, possibly uneven light; a cable lifted above its shadow; clutter on the
 table; and camera effects (exposure in Blender; vignetting, blur, noise and the JPEG quality
@@ -69,7 +69,7 @@ def srgb_to_linear(colour):
 
 def lifted(truth, look):
     """The truth raised by ``look.lift`` radii (the fast renderer's convention: z += lift r)."""
-    from cable_reconstruction.engine.ground_truth import GroundTruth
+    from cable_reconstruction.engine.io.ground_truth import GroundTruth
 
     if not look.lift:
         return truth
@@ -354,7 +354,7 @@ def build_scene(bpy, package, truth, texture_path, samples, look, placed=(), thr
     """Table, cable, clutter, light and render settings in a fresh empty scene."""
     from cable_reconstruction.addon.scene_objects import build_cable_curve
     from cable_reconstruction.engine import CablePath, Result
-    from cable_reconstruction.engine.synthetic_render import table_square
+    from cable_reconstruction.engine.synthetic.render import table_square
 
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
@@ -428,7 +428,7 @@ def flatten_to_silhouette(bpy, scene):
 
 def choose_look(family, look_seed, layout_seed):
     """The look to render: the original sample's (seeded like the layout) or a family's."""
-    from cable_reconstruction.engine.synthetic_looks import (DEFAULT_LOOK, sample_look,
+    from cable_reconstruction.engine.synthetic.looks import (DEFAULT_LOOK, sample_look,
                                                              with_camera_effects_off)
 
     if family == "default":  # Cycles adds no camera effects to it; Blender writes JPEG 90
@@ -438,7 +438,7 @@ def choose_look(family, look_seed, layout_seed):
 
 
 def parse_args(argv=None):
-    from cable_reconstruction.engine.synthetic_looks import LOOK_FAMILIES
+    from cable_reconstruction.engine.synthetic.looks import LOOK_FAMILIES
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("-o", "--output", default=str(ROOT / "samples" / "sequence"))
@@ -447,7 +447,7 @@ def parse_args(argv=None):
     parser.add_argument("--layout", default="table", choices=("table", "hard"),
                         help="table: a cable with --crossings crossings far apart, every view "
                              "framing it; hard: a heap of 12-20 crossings close together "
-                             "(engine.synthetic_layouts.hard_layout; --crossings ignored), "
+                             "(engine.synthetic.layouts.hard_layout; --crossings ignored), "
                              "each view framing part of it")
     parser.add_argument("--crossings", type=int, default=3)
     parser.add_argument("--seed", type=int, default=3, help="seeds the layout and the cameras")
@@ -458,7 +458,7 @@ def parse_args(argv=None):
                              "the cable thicker in the images")
     parser.add_argument("--samples", type=int, default=32, help="Cycles samples per pixel")
     parser.add_argument("--look", default="default", choices=("default",) + LOOK_FAMILIES,
-                        help="look family (engine.synthetic_looks); 'default' is the original "
+                        help="look family (engine.synthetic.looks); 'default' is the original "
                              "red glossy cable on light oak under a soft sun")
     parser.add_argument("--look-seed", type=int, default=None,
                         help="seeds the look (default: --seed), e.g. one of HELD_OUT_SEEDS")
@@ -489,12 +489,12 @@ def main():
 
     from cable_reconstruction.addon.scene_objects import build_cameras
     from cable_reconstruction.engine import write_colmap_model
-    from cable_reconstruction.engine.ground_truth import write_ground_truth
-    from cable_reconstruction.engine.synthetic_cameras import cable_pixel_width, handheld_cameras
-    from cable_reconstruction.engine.synthetic_layouts import hard_layout, table_layout
-    from cable_reconstruction.engine.synthetic_scene import HARD_FRAMING
-    from cable_reconstruction.engine.synthetic_render import render_masks
-    from cable_reconstruction.engine.synthetic_textures import table_texture
+    from cable_reconstruction.engine.io.ground_truth import write_ground_truth
+    from cable_reconstruction.engine.synthetic.cameras import cable_pixel_width, handheld_cameras
+    from cable_reconstruction.engine.synthetic.layouts import hard_layout, table_layout
+    from cable_reconstruction.engine.synthetic.scene import HARD_FRAMING
+    from cable_reconstruction.engine.synthetic.render import render_masks
+    from cable_reconstruction.engine.synthetic.textures import table_texture
 
     look = choose_look(args.look, args.look_seed, args.seed)
     if args.layout == "hard":  # a heap, each view framing part of it (as `bench topology`)

@@ -1,0 +1,124 @@
+"""``python -m engine bench STAGE``: the benchmarks' command (developer checkouts only)."""
+
+from ..cli.main import ProgressBar
+from ..errors import InputError
+
+__all__ = ["STAGES", "add_bench_command", "run_bench"]
+
+STAGES = ("segment", "looks", "cameras", "carve", "rod", "pipeline", "pipeline-looks", "topology",
+          "faults", "preview", "curve", "cancel", "memory")
+
+
+def add_bench_command(commands, *, parents=()):
+    """Add ``bench`` to the command line's subparsers ``commands``."""
+    bench = commands.add_parser(
+        "bench", parents=list(parents),
+        help="measure a stage's accuracy and speed on ground-truth scenes",
+        description="Print a table: one row per ground-truth scene.")
+    bench.add_argument("stage", choices=STAGES)
+    bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
+    bench.add_argument("--seeds", type=int, default=3,
+                       help="scenes per family and seed set (looks, pipeline-looks, "
+                            "topology)")
+    bench.add_argument("--families", metavar="NAMES",
+                       help="comma-separated families: look families (looks, pipeline-looks: "
+                            "those only, without the Cycles captures and real photos) or "
+                            "easy, hard (topology: those only, without the Cycles captures)")
+    bench.add_argument("--sample", default="samples/sequence",
+                       help="the realistic sample's folder (skipped if missing)")
+    bench.set_defaults(run=run_bench)
+
+
+def _chosen_families(args, known, kind):
+    """The families ``--families`` names, each one of ``known`` (an InputError otherwise)."""
+    families = tuple(name.strip() for name in args.families.split(",") if name.strip())
+    unknown = [name for name in families if name not in known]
+    if unknown or not families:
+        raise InputError(f"unknown {kind} famil{'ies' if len(unknown) > 1 else 'y'} "
+                         f"{', '.join(unknown) or '(none given)'}: choose from "
+                         f"{', '.join(known)}")
+    return families
+
+
+def _family_options(args):
+    """``bench looks`` / ``pipeline-looks`` options of ``--families``: those families only,
+    without the captures and real photos."""
+    if args.families is None:
+        return {}
+    from ..synthetic.looks import LOOK_FAMILIES
+
+    options = {"families": _chosen_families(args, LOOK_FAMILIES, "look"), "captures": None}
+    return {**options, "real": None} if args.stage == "looks" else options
+
+
+def _topology_families(args):
+    """``bench topology``'s ``--families``: easy, hard or both, without the Cycles captures."""
+    if args.families is None:
+        return {}
+    from .topology import TOPOLOGY_FAMILIES
+
+    return {"families": _chosen_families(args, TOPOLOGY_FAMILIES, "topology"), "captures": None}
+
+
+def run_bench(args):
+    """Print the table(s) of ``bench STAGE``."""
+    from .common import format_table
+    from .segment import bench_segment
+
+    if args.stage in ("segment", "looks"):
+        from .looks import bench_looks
+
+        if args.stage == "segment":
+            print(format_table(bench_segment(sample=args.sample, views=args.views)))
+            print()
+        rows = bench_looks(seeds=args.seeds if args.stage == "looks" else 1,
+                           **_family_options(args))
+    elif args.stage == "cameras":
+        from .cameras import bench_cameras
+
+        rows = bench_cameras(views=args.views, include_sample=True)
+    elif args.stage == "carve":
+        from .carve import bench_carve
+
+        rows = bench_carve(views=args.views)
+    elif args.stage == "rod":
+        from .rod import bench_rod
+
+        rows = bench_rod()
+    elif args.stage in ("preview", "curve", "cancel"):
+        from . import interactive
+
+        bench = getattr(interactive, f"bench_{args.stage}")
+        rows = bench(sample=args.sample, **({"views": args.views} if args.stage == "curve"
+                                             else {}))
+    elif args.stage == "memory":
+        from .memory import MEMORY_COLUMNS, bench_memory
+
+        rows = bench_memory(progress=None if args.quiet else ProgressBar())
+        print(format_table(rows, MEMORY_COLUMNS))
+        return
+    elif args.stage == "faults":
+        from .faults import bench_faults
+
+        rows = bench_faults(progress=None if args.quiet else ProgressBar())
+    elif args.stage == "topology":
+        from .topology import SCENE_COLUMNS, SUMMARY_COLUMNS, bench_topology
+
+        summary, scenes = bench_topology(seeds=args.seeds, views=args.views,
+                                         progress=None if args.quiet else ProgressBar(),
+                                         **_topology_families(args))
+        print(format_table(summary, SUMMARY_COLUMNS))
+        print()
+        print(format_table(scenes, SCENE_COLUMNS))
+        return
+    elif args.stage == "pipeline-looks":
+        from .pipeline import bench_pipeline_looks
+
+        rows = bench_pipeline_looks(seeds=args.seeds, progress=None if args.quiet
+                                    else ProgressBar(), **_family_options(args))
+    else:
+        from .pipeline import bench_pipeline
+
+        rows = bench_pipeline(views=args.views, sample=args.sample,
+                              progress=None if args.quiet else ProgressBar())
+    print(format_table(rows))

@@ -1,0 +1,53 @@
+"""What every bench shares: rows (dicts) printed as a table by :func:`format_table`, a run in a
+fresh process with its peak memory, the bundled sample's folder. Nothing here is timed inside a
+test."""
+
+import multiprocessing
+import resource
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+__all__ = ["format_table", "in_fresh_process", "DEFAULT_SAMPLE"]
+
+DEFAULT_SAMPLE = Path("samples") / "sequence"
+
+
+def format_table(rows, columns=None):
+    """Rows of dicts as a Markdown table (floats with 3 digits)."""
+    columns = columns or list(rows[0])
+
+    def cell(value):
+        if isinstance(value, float):
+            return f"{value:.3f}" if abs(value) < 100 else f"{value:.0f}"
+        return str(value)
+
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(cell(row.get(c, "")) for c in columns) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def _measured(function, args):
+    """Run ``function(*args)`` (returning a dict) and add the process's peak memory to it."""
+    try:  # a spawned process starts with its parent's peak: forget it (Linux)
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:
+        pass
+    row = function(*args)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                peak = int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    row["peak_mb"] = peak
+    return row
+
+
+def in_fresh_process(function, *args):
+    """``function(*args)`` (a dict) run in a new process, with ``peak_mb`` (its peak resident
+    memory, interpreter and libraries included) added."""
+    # a pool's exit terminates its worker (which pycolmap's signal handler reports noisily):
+    # an executor lets it finish
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as executor:
+        return executor.submit(_measured, function, args).result()

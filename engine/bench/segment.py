@@ -1,0 +1,128 @@
+"""``bench segment``: the masks and junction maps of the fast renders and the sample against their
+exact masks, and the segmentation's speed."""
+
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..io.ground_truth import read_ground_truth
+from ..io.image_sequence import read_image
+from ..stages.segmentation import (SegmentationSettings, reference_frames, segment_frame,
+                                   sequence_colour)
+from ..synthetic.scene import SceneSpec, make_scene
+from .common import DEFAULT_SAMPLE
+
+__all__ = ["bench_segment", "junction_scores"]
+
+
+def junction_scores(junctions, truth, camera):
+    """Junction recall and stray pixels of one view against the true crossings.
+
+    Returns
+    -------
+    found : int
+        True crossings in front of the camera and inside the frame with a junction pixel
+        within 2 r (projected) of them. A crossing is where its two strands meet in the image
+        (:meth:`GroundTruth.crossing_in_view`).
+    visible : int
+        Such crossings.
+    stray : int
+        Junction pixels farther than 3 r (projected) from every true crossing.
+    total : int
+        Junction pixels.
+    """
+    ys, xs = np.nonzero(junctions)
+    pixels = np.column_stack([xs + 0.5, ys + 0.5])
+    near = np.zeros(len(pixels), dtype=bool)
+    found = visible = 0
+    for crossing in truth.crossings:
+        (u, v), depth = truth.crossing_in_view(crossing, camera)
+        if not (depth > 0 and 0 <= u < camera.width and 0 <= v < camera.height):
+            continue
+        radius = camera.focal[0] * truth.radius / depth
+        distance = np.hypot(pixels[:, 0] - u, pixels[:, 1] - v)
+        visible += 1
+        found += bool((distance <= 2 * radius).any())
+        near |= distance <= 3 * radius
+    return found, visible, int((~near).sum()), len(pixels)
+
+
+def _timed(images, colour, settings, model, *, passes=3):
+    """Every frame segmented in one pass, as a reconstruction does (the scoring comes after,
+    so it neither counts nor cools the caches between frames); of ``passes`` passes, the
+    fastest (as :mod:`timeit` advises: the others measure the machine's other work too).
+    Returns ``(seconds, segmentations)``."""
+    best = math.inf
+    for _ in range(passes):
+        started = time.perf_counter()
+        segmentations = [segment_frame(image, colour, settings, model=model)
+                         for image in images]
+        best = min(best, time.perf_counter() - started)
+    return best, segmentations
+
+
+def _score_frames(name, images, masks, truth, settings):
+    """As a reconstruction segments: the cable found and its colour model learnt on a few
+    frames (not timed), then every frame segmented with it (timed)."""
+    frames = reference_frames(len(images), 0, settings.model_frames)
+    colour, model = sequence_colour([images[k] for k in frames], None, settings)
+    seconds, segmentations = _timed(images, colour, settings, model)
+    plain_seconds, _ = _timed(images, colour, replace(settings, edge_reach=0), model)
+    ious, found, visible, stray, total = [], 0, 0, 0, 0
+    for segmentation, mask, camera in zip(segmentations, masks, truth.cameras):
+        ious.append((segmentation.mask & mask).sum() / max((segmentation.mask | mask).sum(), 1))
+        f, v, s, t = junction_scores(segmentation.junctions, truth, camera)
+        found, visible, stray, total = found + f, visible + v, stray + s, total + t
+    return {"scene": name, "frames": len(images), "size": f"{images[0].shape[1]}x"
+            f"{images[0].shape[0]}", "iou_mean": float(np.mean(ious)),
+            "iou_min": float(np.min(ious)),
+            "junction_recall": found / visible if visible else float("nan"),
+            "junction_stray": stray / total if total else 0.0,
+            "ms_per_frame": 1000 * plain_seconds / len(images),
+            "ms_with_edges": 1000 * seconds / len(images), "hsv": str(colour)}
+
+
+def bench_segment(*, sample=DEFAULT_SAMPLE, views=30, settings=SegmentationSettings()):
+    """Mask IoU, junction recall and stray junction pixels, time per frame on one core.
+
+    Scenes: the realistic sample (if ``sample`` exists) and fast renders with 3, 6 and 12
+    crossings, a knot and a hanging cable at 960x720, and the 3-crossing scene at 1280x720
+    for the speed target. ``ms_per_frame`` is the segmentation and junction map alone
+    (``edge_reach=0``), ``ms_with_edges`` with the outline's refinement (the default); each
+    the fastest of three passes over the frames.
+    """
+    import cv2
+
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        return _bench_segment(sample, views, settings)
+    finally:
+        cv2.setNumThreads(threads)
+
+
+def _bench_segment(sample, views, settings):
+    import cv2
+
+    rows = []
+    sample = Path(sample)
+    if (sample / "ground_truth.json").is_file():
+        truth = read_ground_truth(sample / "ground_truth.json")
+        images = [read_image(sample / "images" / c.name) for c in truth.cameras]
+        masks = [cv2.imread(str(sample / "masks" / (Path(c.name).stem + ".png")),
+                            cv2.IMREAD_GRAYSCALE) > 0 for c in truth.cameras]
+        rows.append(_score_frames("sample (Cycles)", images, masks, truth, settings))
+    for spec in (SceneSpec(crossings=3, seed=1, views=views),
+                 SceneSpec(crossings=6, seed=2, views=views),
+                 SceneSpec(crossings=12, seed=3, views=views, radius=0.005),
+                 SceneSpec(kind="knot", seed=4, views=views),
+                 SceneSpec(kind="hanging", seed=5, views=views),
+                 SceneSpec(crossings=3, seed=1, views=views, width=1280, height=720)):
+        scene = make_scene(spec)
+        label = f"{spec.kind} {spec.crossings}" if spec.kind == "table" else spec.kind
+        rows.append(_score_frames(f"fast {label}", list(scene.images), list(scene.masks),
+                                  scene.truth, settings))
+    return rows

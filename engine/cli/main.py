@@ -1,0 +1,305 @@
+"""The ``python -m engine`` command line.
+
+Exit codes: 0 success, 2 bad input (one-line reason on stderr), 3 reconstruction failed,
+4 an internal error (a bug: one line naming where, the traceback in a file), 130 cancelled.
+"""
+
+import argparse
+import importlib
+import importlib.util
+import logging
+import os
+import sys
+import tempfile
+import traceback
+from pathlib import Path
+
+from .. import __version__
+from ..errors import Cancelled, InputError, ReconstructionError
+from .settings import add_settings_arguments, settings_from_arguments
+
+__all__ = ["main", "build_parser", "add_reconstruct_arguments", "reconstruct_arguments",
+           "run_with_exit_code", "ProgressBar"]
+
+EXIT_OK, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_BUG = 0, 2, 3, 4
+log = logging.getLogger(__name__)
+
+
+class ProgressBar:
+    """``progress(fraction, message)`` drawn as one line on stderr (redrawn on a terminal)."""
+
+    def __init__(self, stream=sys.stderr, width=30):
+        self.stream, self.width = stream, width
+        self.live = stream.isatty()
+        self.last = None
+
+    def __call__(self, fraction, message):
+        filled = int(round(self.width * min(max(fraction, 0.0), 1.0)))
+        line = f"[{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:3.0f}% {message}"
+        if self.live:
+            self.stream.write("\r" + line[:120].ljust(120))
+            if fraction >= 1.0:
+                self.stream.write("\n")
+        elif line != self.last:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+        self.last = line
+
+
+def _add_agreement_arguments(parser):
+    """``--no-agreement`` and the ``--agreement-*`` settings of the masks' agreement."""
+    from ..stages.mask_agreement import MaskAgreementSettings
+
+    parser.add_argument("--no-agreement", action="store_true",
+                        help="use each frame's mask as segmented, not checked against the "
+                             "other views (masks given with --masks always are)")
+    add_settings_arguments(parser, MaskAgreementSettings, prefix="agreement")
+
+
+def _agreement_settings(args):
+    from dataclasses import replace
+
+    from ..stages.mask_agreement import MaskAgreementSettings
+
+    settings = settings_from_arguments(MaskAgreementSettings, args, prefix="agreement")
+    return replace(settings, rounds=0) if args.no_agreement else settings
+
+
+def _run_segment(args):
+    from ..stages.carving import CarvingSettings
+    from ..stages.segmentation import ColourRange, SegmentationSettings
+    from .segment import segment_sequence_to_folder
+
+    colour = ColourRange.parse(args.hsv) if args.hsv else None
+    settings = settings_from_arguments(SegmentationSettings, args)
+    colour, widths = segment_sequence_to_folder(
+        args.images, args.output, colour=colour, settings=settings,
+        reference_frame=args.reference_frame, overwrite=args.overwrite, cameras=args.cameras,
+        agreement=_agreement_settings(args), carving=settings_from_arguments(CarvingSettings, args),
+        progress=None if args.quiet else ProgressBar())
+    several = settings.all_cables and args.hsv is None  # each cable's colour was logged
+    log.info("%d frames, cable %.1f-%.1f px wide%s", len(widths), min(widths), max(widths),
+             ", every cable of its own colour" if several else f", --hsv {colour}")
+
+
+def _run_cameras(args):
+    from .cameras import cameras_command
+
+    estimate = cameras_command(args.images, args.output, overwrite=args.overwrite,
+                               progress=None if args.quiet else ProgressBar())
+    if estimate.unregistered:
+        log.warning("did not register: %s", ", ".join(estimate.unregistered))
+    log.info("%d cameras written to %s", len(estimate.cameras), args.output)
+
+
+def add_reconstruct_arguments(parser):
+    """The inputs and options of a reconstruction, shared by ``reconstruct`` and the add-on's
+    ``blender --command`` entry (read back with :func:`reconstruct_arguments`)."""
+    from ..stages.carving import CarvingSettings
+    from ..stages.segmentation import SegmentationSettings
+
+    parser.add_argument("images", help="folder of .jpg/.png frames, or a video")
+    parser.add_argument("--cameras", metavar="MODEL_DIR",
+                        help="COLMAP model (text or binary) of the frames, used as is "
+                             "(default: estimate the cameras)")
+    parser.add_argument("--masks", metavar="MASKS_DIR",
+                        help="masks written by 'segment' (possibly edited), used instead of "
+                             "segmenting")
+    scale = parser.add_mutually_exclusive_group()
+    scale.add_argument("--diameter", type=float, metavar="MM",
+                       help="the cable's measured diameter in mm: the result is in metres")
+    scale.add_argument("--length", type=float, metavar="M",
+                       help="the cable's length in metres: the result is in metres")
+    parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    parser.add_argument("--hsv", metavar="H1,S1,V1,H2,S2,V2",
+                        help="cable colour range (default: found on the reference frame)")
+    parser.add_argument("--reference-frame", type=int, default=0,
+                        help="frame the automatic colour is taken from (default 0)")
+    add_settings_arguments(parser, SegmentationSettings)
+    _add_agreement_arguments(parser)
+    add_settings_arguments(parser, CarvingSettings)
+
+
+def reconstruct_arguments(args):
+    """Keyword arguments of :func:`engine.pipeline.run_reconstruction` from parsed arguments."""
+    from ..pipeline import PipelineSettings
+    from ..stages.carving import CarvingSettings
+    from ..stages.segmentation import ColourRange, SegmentationSettings
+
+    settings = PipelineSettings(segmentation=settings_from_arguments(SegmentationSettings, args),
+                                agreement=_agreement_settings(args),
+                                carving=settings_from_arguments(CarvingSettings, args),
+                                reference_frame=args.reference_frame)
+    return dict(images=args.images, cameras=args.cameras, masks=args.masks,
+                colour=ColourRange.parse(args.hsv) if args.hsv else None,
+                diameter=args.diameter, length=args.length, settings=settings)
+
+
+def _run_reconstruct(args):
+    from pathlib import Path
+
+    from ..io.files import check_output_file
+    from ..io.obj import write_obj
+    from ..io.result import write_result
+    from ..pipeline import reconstruct
+
+    output = Path(args.output or Path(args.images).resolve().name + ".cable.json")
+    for path in (output, Path(args.obj) if args.obj else None):
+        if path is not None:  # before the work, not when its result is written
+            check_output_file(path, overwrite=args.overwrite)
+    result = reconstruct(**reconstruct_arguments(args),
+                         progress=None if args.quiet else ProgressBar())
+    write_result(result, output, overwrite=args.overwrite)
+    if args.obj:
+        write_obj(result, args.obj, overwrite=args.overwrite)
+    for warning in result.warnings:
+        log.warning("warning: %s", warning)
+    points = sum(len(path.points) for path in result.paths)
+    log.info("%d path(s), %d points, %d crossing(s), radius %.4g %s -> %s", len(result.paths),
+             points, len(result.crossings), result.radius, result.units, output)
+
+
+def build_parser():
+    """The argument parser with every stage command."""
+    from ..stages.carving import CarvingSettings
+    from ..stages.segmentation import SegmentationSettings
+
+    parser = argparse.ArgumentParser(
+        prog="python -m engine",
+        description="Reconstruct a cable, rope or hose from photos as one continuous curve.",
+    )
+    parser.add_argument("--version", action="version", version=f"cable_recon {__version__}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="only print errors")
+    parser.add_argument("--debug", action="store_true",
+                        help="an internal error shows its traceback (and is not caught)")
+    # -q also after the command (a subcommand's default must not undo a -q given before it).
+    quiet = argparse.ArgumentParser(add_help=False)
+    quiet.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                       help="only print errors")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    segment = commands.add_parser(
+        "segment", parents=[quiet], help="write cable masks and junction maps of every frame",
+        description="Segment the cable in every frame and check each mask against the other "
+                    "views (cameras from --cameras, or estimated): OUT/masks/*.png (cable = "
+                    "255), OUT/junctions/*.png and OUT/contact_sheet.png for a quick look "
+                    "(red: removed, cyan: filled by the agreement across views).")
+    segment.add_argument("images", help="folder of .jpg/.png frames, or a video")
+    segment.add_argument("-o", "--output", required=True, help="output folder")
+    colour = segment.add_mutually_exclusive_group()
+    colour.add_argument("--hsv", metavar="H1,S1,V1,H2,S2,V2",
+                        help="cable colour range (OpenCV HSV: H 0-179 wrapping, S and V 0-255)")
+    colour.add_argument("--auto", action="store_true",
+                        help="find the cable colour on the reference frame (the default)")
+    segment.add_argument("--reference-frame", type=int, default=0,
+                         help="frame the automatic colour is taken from (default 0)")
+    segment.add_argument("--overwrite", action="store_true", help="replace existing masks")
+    segment.add_argument("--cameras", metavar="MODEL_DIR",
+                         help="COLMAP model (text or binary) of the frames, to agree the masks "
+                              "across views (default: estimate the cameras)")
+    add_settings_arguments(segment, SegmentationSettings)
+    _add_agreement_arguments(segment)
+    add_settings_arguments(segment, CarvingSettings)
+    segment.set_defaults(run=_run_segment)
+
+    cameras = commands.add_parser(
+        "cameras", parents=[quiet], help="estimate the cameras with structure from motion (pycolmap)",
+        description="Estimate the cameras of the frames and write a COLMAP text model "
+                    "(image names = file names), upright: the table is z = 0.")
+    cameras.add_argument("images", help="folder of .jpg/.png frames, or a video")
+    cameras.add_argument("-o", "--output", required=True, help="model folder")
+    cameras.add_argument("--overwrite", action="store_true", help="replace an existing model")
+    cameras.set_defaults(run=_run_cameras)
+
+    rebuild = commands.add_parser(
+        "reconstruct", parents=[quiet], help="reconstruct the cable as one continuous centreline",
+        description="Reconstruct the cable(s) in the frames: a result JSON "
+                    "(cable_recon.result/1) with one path per cable, its crossings and cameras.")
+    add_reconstruct_arguments(rebuild)
+    rebuild.add_argument("-o", "--output", metavar="RESULT_JSON",
+                         help="result file (default: <images folder name>.cable.json here)")
+    rebuild.add_argument("--obj", metavar="OBJ", help="also write the cable as an OBJ tube mesh")
+    rebuild.set_defaults(run=_run_reconstruct)
+
+    bench = _developer_bench()
+    if bench is not None:  # a developer checkout: the extension leaves engine.bench out
+        bench.add_bench_command(commands, parents=[quiet])
+    return parser
+
+
+def _developer_bench():
+    """``engine.bench.cli`` where the developer packages are present (a checkout), else None:
+    the extension ships without them, and its command line has no ``bench``."""
+    package = __package__.rpartition(".")[0]
+    if importlib.util.find_spec(f"{package}.bench") is None:
+        return None
+    return importlib.import_module(f"{package}.bench.cli")
+
+
+def main(argv=None):
+    """Run the command line; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    package_log = logging.getLogger(__package__)
+    package_log.addHandler(handler)
+    package_log.setLevel(logging.ERROR if args.quiet else logging.INFO)
+    if getattr(args, "run", None) is None:
+        parser.print_help(sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        return run_with_exit_code(args.run, args, debug=args.debug)
+    finally:
+        package_log.removeHandler(handler)
+
+
+def run_with_exit_code(run, *args, stream=None, debug=False):
+    """Call ``run(*args)``; the exit code, with a one-line reason on ``stream`` on failure.
+
+    0 success (or what ``run`` returns), 2 bad input, 3 reconstruction failed, 4 an internal
+    error (a bug: the line names the engine's module, function and line it came from and the
+    file its traceback went to; re-raised when ``debug``), 130 cancelled.
+    """
+    stream = stream or sys.stderr
+    try:
+        return run(*args) or EXIT_OK
+    except InputError as error:
+        print(f"error: {error}", file=stream)
+        return EXIT_BAD_INPUT
+    except ReconstructionError as error:
+        print(f"reconstruction failed: {error}", file=stream)
+        return EXIT_FAILED
+    except FileExistsError as error:
+        print(f"error: {error}", file=stream)
+        return EXIT_BAD_INPUT
+    except (Cancelled, KeyboardInterrupt):
+        print("cancelled", file=stream)
+        return 130
+    except Exception as error:
+        if debug:
+            raise
+        path = Path(tempfile.gettempdir()) / f"cable_recon-traceback-{os.getpid()}.txt"
+        try:
+            path.write_text("".join(traceback.format_exception(error)))
+            kept = f"the traceback is in {path}"
+        except OSError:
+            kept = "run with --debug to see the traceback"
+        message = str(error).splitlines()[0] if str(error) else ""
+        print(f"internal error (a bug, please report it) in {_where(error)}: "
+              f"{type(error).__name__}: {message} ({kept})", file=stream)
+        return EXIT_BUG
+
+
+def _where(error):
+    """``module.function:line`` of the deepest frame of the engine (or the add-on) in the
+    traceback, else of the deepest frame."""
+    frames = traceback.extract_tb(error.__traceback__)
+    root = Path(__file__).resolve().parents[2]
+    ours = [frame for frame in frames
+            if any(Path(frame.filename).resolve().is_relative_to(root / package)
+                   for package in ("engine", "addon"))]
+    frame = (ours or frames)[-1]
+    path = Path(frame.filename).resolve()
+    name = ".".join(path.relative_to(root).with_suffix("").parts) if ours else path.stem
+    return f"{name}.{frame.name}:{frame.lineno}"

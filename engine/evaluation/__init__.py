@@ -1,0 +1,2 @@
+"""Developer code, not in the extension: how good a reconstruction or a camera estimate is,
+measured against a ground truth, in units of the true cable radius."""
