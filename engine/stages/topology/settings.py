@@ -1,0 +1,161 @@
+"""The topology stage's settings: the single source of its defaults."""
+
+from dataclasses import dataclass
+
+__all__ = ["TopologySettings"]
+
+
+@dataclass(frozen=True)
+class TopologySettings:
+    """How crossings are resolved and paths are joined (lengths in units of the radius r).
+
+    Attributes
+    ----------
+    anchor_distance : float
+        Least horizontal distance from a junction's centre to the branch points the cues
+        compare; it grows for shallow crossings, whose strands overlap farther out.
+    anchor_margin : float
+        The branch points lie this far beyond where two strands of width 2 r crossing at the
+        junction's smallest angle between branches stop overlapping.
+    max_anchor_distance : float
+        Greatest distance of the branch points from the junction's centre.
+    height_window : float
+        A branch's height is the mean height of its centreline within this arc length each way
+        of its branch point (and on its own half of a segment between two junctions).
+    bend_scale : float
+        Turning angle (radians) of a strand through a junction that costs half a unit of
+        log-likelihood: the bending cost is ``energy / (2 bend_scale**2)``.
+    vertical_weight : float
+        Heights count this much in the bending energy (the over strand's ramp is a real bend
+        that the height cue already reads, and carving noise is largest along ``up``).
+    height_scale : float
+        Height difference between two crossing strands worth one unit of log-odds.
+    height_cap : float
+        The height cue gives one order at most twice this log-odds over the other.
+    image_gain : float
+        Log-odds per unit of the image cue's statistic: the views' weighted mean score over its
+        standard error (a t statistic).
+    image_spread : float
+        Least standard deviation of the view scores assumed by that statistic.
+    image_prior_views : float
+        The statistic shrinks by ``n / (n + image_prior_views)`` for ``n`` effective views: one
+        or two views that happen to agree closely are not taken as certain.
+    image_cap : float
+        The image cue gives one order at most twice this log-odds over the other.
+    top_down_power : float
+        A view weighs ``cos(zenith angle) ** top_down_power``: views straight down count most.
+    min_pixel_radius : float
+        Views where the cable's radius is below this many pixels are not used; the weight grows
+        to 1 over the next two pixels.
+    occluder_margin : float
+        A view is not used for a junction when another part of the cable, nearer the camera,
+        projects within this many projected radii (plus one) of the paths between its branch
+        points and centre.
+    highlight_search : float
+        A projected branch point moves to the brightest cable pixel within this many projected
+        radii (the paper's answer to specular highlights: a path starting on a highlight
+        follows it along the cable).
+    highlight_clip : float
+        Before the gradient is taken, each colour channel is clipped at this quantile of its
+        values on the cable's pixels, so the edges of specular highlights cost nothing.
+    edge_scale : float
+        A pixel costs ``edge_floor + g**2 / edge_scale`` for a gradient magnitude ``g`` (8-bit
+        levels per pixel, the largest over the colour channels): squaring makes the few strong
+        occlusion edges count more than many weak ripples of shading and noise.
+    edge_floor : float
+        Cost of every pixel: paths are short as well as smooth, and a view of noise scores near
+        zero.
+    path_radius : float
+        The paths are found where the cable's radius is at most this many pixels: a view that
+        shows it larger is reduced around the junction first (the cost of the paths grows
+        with the square of the patch's side; the edges they weigh are as clear).
+    spur_length : float
+        At a junction with an odd number of branches or more than four, a branch to a free end
+        shorter than this may be a spur of carving noise (or a stub of cable): it may stay
+        unpaired, and a piece made of it alone is dropped.
+    unpaired_cost : float
+        Log-likelihood cost of leaving a branch that is not such a spur unpaired, and gain of
+        leaving a spur unpaired.
+    gap_length : float
+        A junction with an odd number of branches and no spur (one branch was missed by the
+        carving) is joined to a free end within this horizontal distance whose cable heads
+        towards it: the gap is bridged straight.
+    bigon_length : float
+        A segment up to this long between two junctions that each miss a branch is taken for
+        two strands lying together between two crossings, and doubled (0: never).
+    min_path_length : float
+        Paths shorter than this (specks of carving noise) are dropped, unless nothing else is
+        left.
+    bridge_distance : float
+        Branches are cut this far (horizontally) from the junction's centre and joined by a
+        smooth bridge.
+    separation : float
+        Vertical distance between the over and the under strand that the bridges are given.
+    lift_width : float
+        Half width (horizontal arc length) of the bump that lifts or lowers a strand there.
+    confident : float
+        Crossings less sure than this are reported with a warning.
+    max_degree : int
+        Junctions with more branches are paired greedily by bending.
+    search_budget : int
+        Largest number of combinations of matchings the one-path search tries per cable (when
+        one makes the cable one path it comes early: by the 18th in every hard tuning heap;
+        the whole budget is spent only where none does).
+    search_window : float
+        Having found the most likely combination that makes each cable one path, the search
+        weighs the others up to this many log-units less likely (each then weighs under
+        e^-window of it) into every junction's probability.
+    """
+
+    anchor_distance: float = 3.0
+    anchor_margin: float = 1.5
+    max_anchor_distance: float = 7.0
+    height_window: float = 1.5
+    bend_scale: float = 0.5
+    vertical_weight: float = 0.3
+    height_scale: float = 0.4
+    height_cap: float = 3.0
+    image_gain: float = 0.5
+    image_spread: float = 0.1
+    image_prior_views: float = 3.0
+    image_cap: float = 3.0
+    top_down_power: float = 2.0
+    min_pixel_radius: float = 1.5
+    occluder_margin: float = 1.5
+    highlight_search: float = 0.7
+    highlight_clip: float = 0.8
+    edge_scale: float = 10.0
+    edge_floor: float = 1.0
+    path_radius: float = 3.0
+    spur_length: float = 15.0
+    unpaired_cost: float = 4.0
+    gap_length: float = 10.0
+    bigon_length: float = 30.0
+    min_path_length: float = 10.0
+    bridge_distance: float = 2.5
+    separation: float = 2.2
+    lift_width: float = 4.0
+    confident: float = 0.9
+    max_degree: int = 8
+    search_budget: int = 2000
+    search_window: float = 9.0
+
+    def __post_init__(self):
+        for name in ("anchor_distance", "max_anchor_distance", "height_window", "bend_scale",
+                     "height_scale", "image_gain", "image_spread", "highlight_search",
+                     "edge_scale", "path_radius", "bridge_distance", "lift_width"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"TopologySettings.{name} must be positive")
+        for name in ("anchor_margin", "vertical_weight", "height_cap", "image_prior_views",
+                     "image_cap", "top_down_power", "min_pixel_radius", "occluder_margin",
+                     "edge_floor", "spur_length", "unpaired_cost", "gap_length", "bigon_length",
+                     "min_path_length", "separation"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"TopologySettings.{name} must not be negative")
+        if not 0.0 < self.highlight_clip <= 1.0:
+            raise ValueError("TopologySettings.highlight_clip must lie in (0, 1]")
+        if not 0.0 <= self.confident <= 1.0:
+            raise ValueError("TopologySettings.confident must lie in [0, 1]")
+        if self.max_degree < 2 or self.search_budget < 1 or not self.search_window >= 0:
+            raise ValueError("TopologySettings.max_degree must be >= 2, search_budget >= 1 "
+                             "and search_window >= 0")
