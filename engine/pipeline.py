@@ -556,11 +556,7 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         Too few frames registered, no cable in the frames, or no path could be formed.
     Cancelled
     """
-    if diameter is not None and length is not None:
-        raise InputError("give the cable's diameter or its length, not both")
-    for name, value in (("diameter", diameter), ("length", length)):
-        if value is not None and not value > 0:
-            raise InputError(f"the {name} must be a positive number")
+    _check_scale(diameter, length)
     if colour is not None and not isinstance(colour, ColourRange):
         colour = ColourRange.parse(str(colour))
     agree = masks is None and settings.agreement.rounds > 0
@@ -568,53 +564,14 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         "carving", "graph", "topology", "fit"]
     clock = _Clock(progress, cancel, stages)
     with open_image_sequence(images) as sequence:
-        stage = clock.stage("masks")
-        if masks is not None:
-            frame_masks, frame_junctions = read_masks(masks, sequence.names, sequence.width,
-                                                      sequence.height, packed=True)
-            if frame_junctions is None:
-                frame_junctions = [_junctions_of(mask(), settings.segmentation)
-                                   for mask in frame_masks]
-            stage(1.0, "masks")
-        else:
-            colour, frame_masks, frame_junctions = _segment(sequence, colour, settings, stage,
-                                                            cancel)
-        clock.done()
-        if not any(mask.any() for mask in frame_masks):
-            raise ReconstructionError("no cable pixels in any frame: check the cable colour "
-                                      "(python -m engine segment shows the masks)")
-        empty = [name for name, mask in zip(sequence.names, frame_masks) if not mask.any()]
-        stage = clock.stage("cameras")
-        frame_cameras, up, warnings = _cameras(sequence, cameras, settings, stage, cancel)
-        clock.done()
-        if empty:
-            warnings.append(f"no cable pixels in {len(empty)} frame(s): {', '.join(empty)}")
-        if len(frame_cameras) < _FEW_VIEWS:
-            warnings.append(f"only {len(frame_cameras)} views: so few leave the cable's shape "
-                            f"and crossings ambiguous; take {2 * _FEW_VIEWS} or more around it")
-        by_name = dict(zip(sequence.names, zip(sequence.paths, frame_masks, frame_junctions)))
-        views = [View(camera, *by_name[camera.name]) for camera in frame_cameras]
-        if agree:
-            stage = clock.stage("agreement")
-            views, alone = _agree(views, settings, stage, cancel)
-            clock.done()
-            if alone:
-                warnings.append(f"the masks of {len(alone)} frame(s) disagree with the other "
-                                f"views and were used as they are: {', '.join(alone)}")
-            agreed = {view.camera.name: view.mask for view in views}
-            frame_masks = [agreed.get(name, mask)
-                           for name, mask in zip(sequence.names, frame_masks)]
+        colour, frame_masks, frame_junctions = _frame_masks(sequence, masks, colour, settings,
+                                                            clock, cancel)
+        views, frame_masks, up, warnings = _views(sequence, cameras, frame_masks,
+                                                  frame_junctions, agree, settings, clock,
+                                                  cancel)
         grid, topology, warnings, thickness = _carve_and_resolve(views, up, clock, settings,
                                                                  cancel, warnings)
-        reference = min(settings.reference_frame, len(sequence) - 1)
-        order = [reference] + [k for k in range(len(sequence)) if k != reference]
-        number = next((k for k in order if frame_masks[k].any()), reference)
-        image, mask = sequence.read(number), frame_masks[number]()
-        colour_seen = cable_colour(image, mask)
-        camera = next((view.camera for view in views
-                       if view.camera.name == sequence.names[number]), None)
-        colours = path_colours(topology.paths, camera, image, mask) \
-            if len(topology.paths) > 1 and camera is not None else ()
+        colour_seen, colours = _colours_seen(sequence, frame_masks, views, topology, settings)
     stage = clock.stage("fit")
     evidence = [ImageEvidence.from_mask(view.camera, unpacked(view.mask),
                                         unpacked(view.junctions), settings=settings.fit)
@@ -627,6 +584,79 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         estimated=cameras is None, colour=colour_seen, path_colours=colours,
         checks={"core_thickness": thickness})
     return state._fitted(clock, stage, cancel)
+
+
+def _check_scale(diameter, length):
+    """The cable's diameter or its length, not both, each positive (an InputError otherwise)."""
+    if diameter is not None and length is not None:
+        raise InputError("give the cable's diameter or its length, not both")
+    for name, value in (("diameter", diameter), ("length", length)):
+        if value is not None and not value > 0:
+            raise InputError(f"the {name} must be a positive number")
+
+
+def _frame_masks(sequence, masks, colour, settings, clock, cancel):
+    """The "masks" stage: ``(colour, masks, junctions)`` of every frame, read from the folder
+    ``masks`` or segmented (the colour found if None)."""
+    stage = clock.stage("masks")
+    if masks is not None:
+        frame_masks, frame_junctions = read_masks(masks, sequence.names, sequence.width,
+                                                  sequence.height, packed=True)
+        if frame_junctions is None:
+            frame_junctions = [_junctions_of(mask(), settings.segmentation)
+                               for mask in frame_masks]
+        stage(1.0, "masks")
+    else:
+        colour, frame_masks, frame_junctions = _segment(sequence, colour, settings, stage,
+                                                        cancel)
+    clock.done()
+    if not any(mask.any() for mask in frame_masks):
+        raise ReconstructionError("no cable pixels in any frame: check the cable colour "
+                                  "(python -m engine segment shows the masks)")
+    return colour, frame_masks, frame_junctions
+
+
+def _views(sequence, cameras, frame_masks, frame_junctions, agree, settings, clock, cancel):
+    """The "cameras" and "agreement" stages: ``(views, frame_masks, up, warnings)``, the
+    frames' masks as agreed across the views."""
+    empty = [name for name, mask in zip(sequence.names, frame_masks) if not mask.any()]
+    stage = clock.stage("cameras")
+    frame_cameras, up, warnings = _cameras(sequence, cameras, settings, stage, cancel)
+    clock.done()
+    if empty:
+        warnings.append(f"no cable pixels in {len(empty)} frame(s): {', '.join(empty)}")
+    if len(frame_cameras) < _FEW_VIEWS:
+        warnings.append(f"only {len(frame_cameras)} views: so few leave the cable's shape "
+                        f"and crossings ambiguous; take {2 * _FEW_VIEWS} or more around it")
+    by_name = dict(zip(sequence.names, zip(sequence.paths, frame_masks, frame_junctions)))
+    views = [View(camera, *by_name[camera.name]) for camera in frame_cameras]
+    if agree:
+        stage = clock.stage("agreement")
+        views, alone = _agree(views, settings, stage, cancel)
+        clock.done()
+        if alone:
+            warnings.append(f"the masks of {len(alone)} frame(s) disagree with the other "
+                            f"views and were used as they are: {', '.join(alone)}")
+        agreed = {view.camera.name: view.mask for view in views}
+        frame_masks = [agreed.get(name, mask)
+                       for name, mask in zip(sequence.names, frame_masks)]
+    return views, frame_masks, up, warnings
+
+
+def _colours_seen(sequence, frame_masks, views, topology, settings):
+    """The cable's colour in the reference frame (or, without cable there, the first frame with
+    some) and,
+    with several paths, each path's colour there."""
+    reference = min(settings.reference_frame, len(sequence) - 1)
+    order = [reference] + [k for k in range(len(sequence)) if k != reference]
+    number = next((k for k in order if frame_masks[k].any()), reference)
+    image, mask = sequence.read(number), frame_masks[number]()
+    colour_seen = cable_colour(image, mask)
+    camera = next((view.camera for view in views
+                   if view.camera.name == sequence.names[number]), None)
+    colours = path_colours(topology.paths, camera, image, mask) \
+        if len(topology.paths) > 1 and camera is not None else ()
+    return colour_seen, colours
 
 
 def _junctions_of(mask, settings):

@@ -47,8 +47,8 @@ def test_a_bug_is_one_line_naming_where_with_the_traceback_in_a_file():
     line = stream.getvalue()
     assert code == EXIT_BUG == 4 and line.count("\n") == 1
     # the deepest frame of the engine: module, function, line
-    assert re.match(r"internal error \(a bug, please report it\) in engine\.camera\.\S+:\d+: "
-                    r"AttributeError: ", line)
+    assert re.match(r"internal error \(a bug, please report it\) in "
+                    r"engine\.geometry\.camera\.\S+:\d+: AttributeError: ", line)
     traceback_file = Path(re.search(r"the traceback is in (\S+)\)", line).group(1))
     assert "Traceback" in traceback_file.read_text()
     traceback_file.unlink()

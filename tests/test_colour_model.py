@@ -107,7 +107,7 @@ def _wire_on_a_busy_table(width, height, wire):
 
 
 def test_a_thin_wire_in_a_large_frame_is_found(monkeypatch):
-    from engine import colour_model
+    from engine.stages import colour_model
 
     image, cable = _wire_on_a_busy_table(2880, 1920, 5)
     _, candidate = find_cable([image])

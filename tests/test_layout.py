@@ -123,6 +123,25 @@ def test_own_packages_are_imported_relatively(path):
             f"{path.name} imports {module} absolutely"
 
 
+#: The longest a runtime function may be, its docstring aside: longer ones do several jobs.
+LONGEST_FUNCTION = 60
+
+
+@pytest.mark.parametrize("path", RUNTIME_FILES, ids=module_name)
+def test_runtime_functions_are_short(path):
+    tree = ast.parse(path.read_text(), filename=str(path))
+    long = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            first = node.body[0]
+            documented = isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) \
+                and isinstance(first.value.value, str)
+            start = first.end_lineno + 1 if documented else first.lineno
+            if node.end_lineno - start + 1 > LONGEST_FUNCTION:
+                long.append(f"{node.name} ({node.end_lineno - start + 1} lines)")
+    assert not long, f"{module_name(path)}: {', '.join(long)}"
+
+
 def test_library_code_never_prints():
     command_lines = ("engine/cli/main.py", "engine/bench/cli.py", "engine/__main__.py",
                      "addon/batch_command.py")

@@ -33,8 +33,8 @@ from ..synthetic.scene import SceneSpec, hard_spec, make_scene, write_scene
 from .common import in_fresh_process
 from .pipeline import scored_run
 
-__all__ = ["TOPOLOGY_FAMILIES", "CAPTURES", "CAPTURE_FAMILY", "SUMMARY_COLUMNS", "SCENE_COLUMNS", "topology_spec",
-           "bench_topology"]
+__all__ = ["TOPOLOGY_FAMILIES", "CAPTURES", "CAPTURE_FAMILY", "SUMMARY_COLUMNS", "SCENE_COLUMNS",
+           "topology_spec", "bench_topology"]
 
 #: The scene families, easy first.
 TOPOLOGY_FAMILIES = ("easy", "hard")

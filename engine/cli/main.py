@@ -161,9 +161,6 @@ def _run_reconstruct(args):
 
 def build_parser():
     """The argument parser with every stage command."""
-    from ..stages.carving import CarvingSettings
-    from ..stages.segmentation import SegmentationSettings
-
     parser = argparse.ArgumentParser(
         prog="python -m engine",
         description="Reconstruct a cable, rope or hose from photos as one continuous curve.",
@@ -177,6 +174,19 @@ def build_parser():
     quiet.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
                        help="only print errors")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    for add in (_add_segment_command, _add_cameras_command, _add_reconstruct_command):
+        add(commands, quiet)
+    bench = _developer_bench()
+    if bench is not None:  # a developer checkout: the extension leaves engine.bench out
+        bench.add_bench_command(commands, parents=[quiet])
+    return parser
+
+
+def _add_segment_command(commands, quiet):
+    """``segment IMAGES -o OUT``: the masks, junction maps and a contact sheet."""
+    from ..stages.carving import CarvingSettings
+    from ..stages.segmentation import SegmentationSettings
 
     segment = commands.add_parser(
         "segment", parents=[quiet], help="write cable masks and junction maps of every frame",
@@ -202,8 +212,12 @@ def build_parser():
     add_settings_arguments(segment, CarvingSettings)
     segment.set_defaults(run=_run_segment)
 
+
+def _add_cameras_command(commands, quiet):
+    """``cameras IMAGES -o MODEL_DIR``: a COLMAP model of the frames."""
     cameras = commands.add_parser(
-        "cameras", parents=[quiet], help="estimate the cameras with structure from motion (pycolmap)",
+        "cameras", parents=[quiet],
+        help="estimate the cameras with structure from motion (pycolmap)",
         description="Estimate the cameras of the frames and write a COLMAP text model "
                     "(image names = file names), upright: the table is z = 0.")
     cameras.add_argument("images", help="folder of .jpg/.png frames, or a video")
@@ -211,6 +225,9 @@ def build_parser():
     cameras.add_argument("--overwrite", action="store_true", help="replace an existing model")
     cameras.set_defaults(run=_run_cameras)
 
+
+def _add_reconstruct_command(commands, quiet):
+    """``reconstruct IMAGES``: the result JSON (and an OBJ)."""
     rebuild = commands.add_parser(
         "reconstruct", parents=[quiet], help="reconstruct the cable as one continuous centreline",
         description="Reconstruct the cable(s) in the frames: a result JSON "
@@ -220,11 +237,6 @@ def build_parser():
                          help="result file (default: <images folder name>.cable.json here)")
     rebuild.add_argument("--obj", metavar="OBJ", help="also write the cable as an OBJ tube mesh")
     rebuild.set_defaults(run=_run_reconstruct)
-
-    bench = _developer_bench()
-    if bench is not None:  # a developer checkout: the extension leaves engine.bench out
-        bench.add_bench_command(commands, parents=[quiet])
-    return parser
 
 
 def _developer_bench():

@@ -102,7 +102,7 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
     Cancelled
     """
     output = Path(output)
-    masks, junctions = output / "masks", output / "junctions"
+    masks = output / "masks"
     if not overwrite and masks.is_dir() and any(masks.iterdir()):
         raise InputError(f"{masks} already holds masks (pass --overwrite to replace them)")
     if agreement.rounds > 0 and isinstance(cameras, (str, Path)) and not Path(cameras).is_dir():
@@ -113,15 +113,7 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         if not 0 <= reference_frame < len(sequence):
             raise InputError(f"reference frame {reference_frame} does not exist "
                              f"({len(sequence)} frames)")
-        frames = reference_frames(len(sequence), reference_frame, settings.model_frames)
-        found = colour is None
-        colour, model = sequence_colour([sequence.read(k) for k in frames], colour, settings)
-        if found and isinstance(model, SeveralCables) and len(model.cables) > 1:
-            log.info("%d cables found on %s, their colours (as --hsv): %s", len(model.cables),
-                     sequence.names[reference_frame],
-                     "; ".join(str(cable) for cable, _ in model.cables))
-        elif found:
-            log.info("cable colour found on %s: --hsv %s", sequence.names[reference_frame], colour)
+        colour, model = _colour_model(sequence, colour, settings, reference_frame)
         agree = agreement.rounds > 0
         # the segmentation's share of the progress bar (estimating cameras takes long)
         share = (0.3 if cameras is None else 0.6) if agree else 1.0
@@ -141,28 +133,50 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
                 PipelineSettings(segmentation=settings, cameras=camera_settings,
                                  agreement=agreement, carving=carving),
                 stage.part(share, 0.95), cancel)
-        masks.mkdir(parents=True, exist_ok=True)
-        junctions.mkdir(exist_ok=True)
-        thumbnails = []
-        for k, name in enumerate(sequence.names):
-            stem = Path(name).stem + ".png"
-            mask, junction = frame_masks[k](), frame_junctions[k]()
-            write_image(masks / stem, mask.astype(np.uint8) * 255, overwrite=True)
-            write_image(junctions / stem, junction.astype(np.uint8) * 255, overwrite=True)
-            changes = (None, None)
-            if agree and segmented[k] is not frame_masks[k]:
-                before = segmented[k]()
-                changes = (before & ~mask, mask & ~before)
-            thumbnails.append(_overlay(sequence.read(k), mask, junction, *changes))
-        sheet = contact_sheet(thumbnails)
-        write_image(output / "contact_sheet.png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR),
-                    overwrite=True)
+        _write_masks(output, sequence, segmented, frame_masks, frame_junctions)
         stage(1.0, "masks written")
     if empty:
         shown = ", ".join(empty[:5]) + (f" and {len(empty) - 5} more" if len(empty) > 5 else "")
         raise InputError(f"no cable pixels in {shown} with --hsv {colour}: check the colour "
                          f"on {output / 'contact_sheet.png'}")
     return colour, widths
+
+
+def _colour_model(sequence, colour, settings, reference_frame):
+    """The cable's colour (found on the reference frames if None, and logged as ``--hsv``) and
+    the colour model learnt there."""
+    frames = reference_frames(len(sequence), reference_frame, settings.model_frames)
+    found = colour is None
+    colour, model = sequence_colour([sequence.read(k) for k in frames], colour, settings)
+    if found and isinstance(model, SeveralCables) and len(model.cables) > 1:
+        log.info("%d cables found on %s, their colours (as --hsv): %s", len(model.cables),
+                 sequence.names[reference_frame],
+                 "; ".join(str(cable) for cable, _ in model.cables))
+    elif found:
+        log.info("cable colour found on %s: --hsv %s", sequence.names[reference_frame], colour)
+    return colour, model
+
+
+def _write_masks(output, sequence, segmented, frame_masks, frame_junctions):
+    """OUT/masks/*.png, OUT/junctions/*.png and OUT/contact_sheet.png (what the agreement
+    removed in red, what it filled in cyan)."""
+    masks, junctions = output / "masks", output / "junctions"
+    masks.mkdir(parents=True, exist_ok=True)
+    junctions.mkdir(exist_ok=True)
+    thumbnails = []
+    for k, name in enumerate(sequence.names):
+        stem = Path(name).stem + ".png"
+        mask, junction = frame_masks[k](), frame_junctions[k]()
+        write_image(masks / stem, mask.astype(np.uint8) * 255, overwrite=True)
+        write_image(junctions / stem, junction.astype(np.uint8) * 255, overwrite=True)
+        changes = (None, None)
+        if segmented[k] is not frame_masks[k]:
+            before = segmented[k]()
+            changes = (before & ~mask, mask & ~before)
+        thumbnails.append(_overlay(sequence.read(k), mask, junction, *changes))
+    sheet = contact_sheet(thumbnails)
+    write_image(output / "contact_sheet.png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR),
+                overwrite=True)
 
 
 def _agreed(sequence, masks, junctions, cameras, settings, stage, cancel):

@@ -1,8 +1,8 @@
-"""Checks of array arguments shared by the engine's public functions."""
+"""Array arguments checked and frozen, as the engine's public functions and records take them."""
 
 import numpy as np
 
-__all__ = ["as_points"]
+__all__ = ["as_points", "read_only"]
 
 
 def as_points(value, name="points"):
@@ -19,3 +19,11 @@ def as_points(value, name="points"):
     if not np.all(np.isfinite(points)):
         raise ValueError(f"{name} holds a value that is not a finite number")
     return points
+
+
+def read_only(value, dtype=np.float64):
+    """``value`` as a new array of ``dtype`` that cannot be written to (the frozen data of a
+    frozen dataclass)."""
+    array = np.array(value, dtype=dtype)
+    array.setflags(write=False)
+    return array

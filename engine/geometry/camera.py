@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from .arrays import read_only
 
 __all__ = ["CAMERA_MODELS", "Camera", "look_at_point"]
 
@@ -25,12 +26,6 @@ CAMERA_MODELS = {
     "RADIAL": ("f", "cx", "cy", "k1", "k2"),
     "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
 }
-
-
-def _frozen(array):
-    array = np.array(array, dtype=np.float64)
-    array.setflags(write=False)
-    return array
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,15 +62,15 @@ class Camera:
                 f"camera {self.name!r}: model {self.model!r} is not supported "
                 f"(use one of {', '.join(CAMERA_MODELS)})"
             )
-        params = _frozen(self.params).reshape(-1)
+        params = read_only(self.params).reshape(-1)
         expected = len(CAMERA_MODELS[self.model])
         if params.size != expected:
             raise InputError(
                 f"camera {self.name!r}: model {self.model} takes {expected} parameters "
                 f"({', '.join(CAMERA_MODELS[self.model])}), got {params.size}"
             )
-        rotation = _frozen(self.R)
-        translation = _frozen(self.t).reshape(-1)
+        rotation = read_only(self.R)
+        translation = read_only(self.t).reshape(-1)
         if rotation.shape != (3, 3) or translation.shape != (3,):
             raise InputError(f"camera {self.name!r}: R must be 3x3 and t must have 3 values")
         if not (np.all(np.isfinite(params)) and np.all(np.isfinite(rotation))

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .arrays import as_points
+from .arrays import as_points, read_only
 from .camera import Camera, look_at_point
 
 __all__ = ["Similarity", "align_similarity", "align_cameras"]
@@ -28,14 +28,12 @@ class Similarity:
     t: np.ndarray
 
     def __post_init__(self):
-        rotation = np.array(self.R, dtype=np.float64)
-        translation = np.array(self.t, dtype=np.float64).reshape(-1)
+        rotation = read_only(self.R)
+        translation = read_only(self.t).reshape(-1)
         if rotation.shape != (3, 3) or translation.shape != (3,):
             raise ValueError("a similarity needs a 3x3 R and a 3-vector t")
         if not (np.isfinite(self.scale) and self.scale > 0):
             raise ValueError(f"a similarity's scale must be positive, not {self.scale!r}")
-        rotation.setflags(write=False)
-        translation.setflags(write=False)
         object.__setattr__(self, "scale", float(self.scale))
         object.__setattr__(self, "R", rotation)
         object.__setattr__(self, "t", translation)

@@ -175,7 +175,8 @@ def write_colmap_model(folder, cameras, *, points=None, binary=False, overwrite=
         raise ValueError("camera names must be unique")
     folder.mkdir(parents=True, exist_ok=True)
     if not overwrite and _model_kind(folder) is not None:
-        raise FileExistsError(f"{folder} already holds a COLMAP model (pass overwrite to replace it)")
+        raise FileExistsError(f"{folder} already holds a COLMAP model "
+                              "(pass overwrite to replace it)")
 
     reconstruction = pycolmap.Reconstruction()
     intrinsics_ids = {}

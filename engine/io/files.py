@@ -131,10 +131,12 @@ def _write_through_temporary(path, folder, data, overwrite):
             try:
                 os.link(tmp_name, path)
             except FileExistsError:
-                raise FileExistsError(f"{path} already exists (pass overwrite to replace it)") from None
+                raise FileExistsError(f"{path} already exists "
+                                      "(pass overwrite to replace it)") from None
             except OSError:  # file systems without hard links
                 if path.exists():
-                    raise FileExistsError(f"{path} already exists (pass overwrite to replace it)") from None
+                    raise FileExistsError(f"{path} already exists "
+                                          "(pass overwrite to replace it)") from None
                 os.replace(tmp_name, path)
     finally:
         if os.path.exists(tmp_name):

@@ -3,6 +3,8 @@
 import cv2
 import numpy as np
 
+from ..geometry.polylines import arc_length
+
 __all__ = ["draw_overlay", "draw_projected"]
 
 _PATH, _OVER, _UNDER = (255, 220, 0), (40, 220, 40), (40, 120, 255)  # RGB
@@ -41,8 +43,7 @@ def draw_projected(image, camera, points, colour, thickness, *, line_type=cv2.LI
 
 def _stretch(path, index, span):
     """Points of ``path`` within ``span`` of arc length of sample ``index``."""
-    steps = np.linalg.norm(np.diff(path.points, axis=0), axis=1)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    arc = arc_length(path.points)
     return path.points[np.abs(arc - arc[index]) <= span]
 
 

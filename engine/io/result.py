@@ -278,43 +278,12 @@ def result_from_dict(data):
     raw_paths = _require(data, "paths", list, "result")
     if not raw_paths:
         raise ResultFormatError("result.paths is empty: a result holds at least one path")
-    paths = []
-    for i, raw in enumerate(raw_paths):
-        where = f"paths[{i}]"
-        if not isinstance(raw, dict):
-            raise ResultFormatError(f"{where} must be an object")
-        points = _points_array(_require(raw, "points", list, where), f"{where}.points")
-        if len(points) < 2:
-            raise ResultFormatError(f"{where}.points needs at least 2 points")
-        radii = raw.get("radii")
-        if radii is not None:
-            try:
-                radii = np.asarray(radii, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ResultFormatError(f"{where}.radii must be a list of numbers") from None
-            if radii.shape != (len(points),) or not np.all(np.isfinite(radii) & (radii > 0)):
-                raise ResultFormatError(
-                    f"{where}.radii must hold one positive number per point ({len(points)})")
-        closed = raw.get("closed", False)
-        if not isinstance(closed, bool):
-            raise ResultFormatError(f"{where}.closed must be true or false")
-        paths.append(CablePath(points, radii, closed,
-                               _colour_field(raw.get("colour"), f"{where}.colour")))
+    paths = [_path_from_dict(raw, f"paths[{i}]") for i, raw in enumerate(raw_paths)]
     for key in ("crossings", "cameras"):
         if not isinstance(data.get(key, []), list):
             raise ResultFormatError(f"result.{key} must be a list")
-    crossings = []
-    for k, raw in enumerate(data.get("crossings", [])):
-        where = f"crossings[{k}]"
-        if not isinstance(raw, dict):
-            raise ResultFormatError(f"{where} must be an object")
-        position = _points_array([_require(raw, "position", list, where)], f"{where}.position")[0]
-        over = _strand(raw.get("over"), f"{where}.over")
-        under = _strand(raw.get("under"), f"{where}.under")
-        confidence = raw.get("confidence", 1.0)
-        if not isinstance(confidence, (int, float)) or not 0.0 <= confidence <= 1.0:
-            raise ResultFormatError(f"{where}.confidence must be a number in [0, 1]")
-        crossings.append(Crossing(position, over, under, confidence))
+    crossings = [_crossing_from_dict(raw, f"crossings[{k}]")
+                 for k, raw in enumerate(data.get("crossings", []))]
     cameras = []
     for k, raw in enumerate(data.get("cameras", [])):
         try:
@@ -335,6 +304,41 @@ def result_from_dict(data):
                       timings=dict(timings), colour=colour)
     except ValueError as error:  # cross-field checks (crossing indices) live in Result
         raise ResultFormatError(str(error)) from None
+
+
+def _path_from_dict(raw, where):
+    """A :class:`CablePath` from the result's ``paths`` entry ``where``, checked."""
+    if not isinstance(raw, dict):
+        raise ResultFormatError(f"{where} must be an object")
+    points = _points_array(_require(raw, "points", list, where), f"{where}.points")
+    if len(points) < 2:
+        raise ResultFormatError(f"{where}.points needs at least 2 points")
+    radii = raw.get("radii")
+    if radii is not None:
+        try:
+            radii = np.asarray(radii, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ResultFormatError(f"{where}.radii must be a list of numbers") from None
+        if radii.shape != (len(points),) or not np.all(np.isfinite(radii) & (radii > 0)):
+            raise ResultFormatError(
+                f"{where}.radii must hold one positive number per point ({len(points)})")
+    closed = raw.get("closed", False)
+    if not isinstance(closed, bool):
+        raise ResultFormatError(f"{where}.closed must be true or false")
+    return CablePath(points, radii, closed, _colour_field(raw.get("colour"), f"{where}.colour"))
+
+
+def _crossing_from_dict(raw, where):
+    """A :class:`Crossing` from the result's ``crossings`` entry ``where``, checked."""
+    if not isinstance(raw, dict):
+        raise ResultFormatError(f"{where} must be an object")
+    position = _points_array([_require(raw, "position", list, where)], f"{where}.position")[0]
+    over = _strand(raw.get("over"), f"{where}.over")
+    under = _strand(raw.get("under"), f"{where}.under")
+    confidence = raw.get("confidence", 1.0)
+    if not isinstance(confidence, (int, float)) or not 0.0 <= confidence <= 1.0:
+        raise ResultFormatError(f"{where}.confidence must be a number in [0, 1]")
+    return Crossing(position, over, under, confidence)
 
 
 def read_result(path):

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.arrays import as_points
+from ..geometry.polylines import arc_length
 
 __all__ = ["BezierSettings", "BezierCurve", "fit_bezier", "fit_result_curves",
            "distance_to_polyline"]
@@ -184,8 +185,7 @@ class _PieceFitter:
 
     def __init__(self, points, tangents, tolerance):
         self.points, self.tangents, self.tolerance = points, tangents, tolerance
-        steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-        self.arc = np.concatenate([[0.0], np.cumsum(steps)])
+        self.arc = arc_length(points)
 
     def fit(self, first, last):
         """Controls for samples ``first..last`` and whether they stay within tolerance."""
@@ -433,8 +433,7 @@ def _arc_from(path, index, offsets):
     """Arc length from sample ``index`` to each of ``index + offsets`` (offsets in order)."""
     points, n = path.points, len(path.points)
     where = (index + offsets) % n
-    steps = np.linalg.norm(np.diff(points[where], axis=0), axis=1)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    arc = arc_length(points[where])
     return np.abs(arc - arc[list(offsets).index(0)])
 
 

@@ -473,7 +473,10 @@ def estimate_cameras(image_paths, *, settings=CameraEstimationSettings(), focal_
                          pycolmap)
 
 
-def _estimate(folder, names, work, settings, focal_length_px, progress, cancel, pycolmap):
+def _reconstruct(folder, names, work, settings, focal_length_px, progress, cancel, pycolmap):
+    """pycolmap's best reconstruction of the frames (None if none), the matching that made it
+    ("sequential", or "exhaustive" when the sequential pairs registered too few frames) and the
+    seconds each step took."""
     database = work / _DATABASE
     total = len(names)
     token = pycolmap.CancellationToken()
@@ -513,7 +516,15 @@ def _estimate(folder, names, work, settings, focal_length_px, progress, cancel, 
         timings["exhaustive"] = time.perf_counter() - clock
         if again is not None and again.num_reg_images() > registered:
             best, registered, matching = again, again.num_reg_images(), "exhaustive"
+    return best, matching, timings
 
+
+def _estimate(folder, names, work, settings, focal_length_px, progress, cancel, pycolmap):
+    """Features, matching and mapping of the frames ``names`` in ``folder``, then the cameras
+    checked (enough registered) and made upright: a :class:`CameraEstimate`."""
+    best, matching, timings = _reconstruct(folder, names, work, settings, focal_length_px,
+                                           progress, cancel, pycolmap)
+    total = len(names)
     if best is None:
         cameras, points = (), np.zeros((0, 3))
     else:

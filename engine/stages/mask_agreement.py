@@ -206,19 +206,7 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
     Cancelled
     """
     cameras = list(cameras)
-    names = tuple(camera.name for camera in cameras)
-    given = [_packed(item) for item in masks]
-    if len(given) != len(cameras):
-        raise ValueError(f"{len(given)} masks for {len(cameras)} cameras")
-    for camera, mask in zip(cameras, given):
-        if mask.shape != (camera.height, camera.width):
-            raise ValueError(f"the mask of {camera.name!r} is {mask.shape[1]}x{mask.shape[0]}, "
-                             f"its image {camera.width}x{camera.height}")
-    evidence = [None] * len(cameras) if evidence is None else list(evidence)
-    if len(evidence) != len(cameras):
-        raise ValueError(f"{len(evidence)} evidence maps for {len(cameras)} cameras")
-    if junctions is not None and len(junctions) != len(cameras):
-        raise ValueError(f"{len(junctions)} junction maps for {len(cameras)} cameras")
+    given, evidence = _checked_inputs(cameras, masks, evidence, junctions)
     stage = StageProgress(progress)
     current = list(given)  # packed masks are never changed, only replaced
     changed, left_alone, radius = [], [], None
@@ -238,26 +226,59 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
             break
         radius = grid.radius
         voxels = _Voxels(grid, carving, len(cameras))
-        pixels, count, left_alone = 0, 0, []
-        views = part.part(0.6, 1.0)
-        for k, camera in enumerate(cameras):
-            check_cancel(cancel, "the mask agreement")
-            mask = current[k]()
-            new, judged = _agree_view(camera, mask, unpacked(evidence[k], np.float32), voxels,
-                                      settings)
-            if not judged:
-                left_alone.append(camera.name)
-            elif new is not mask:
-                pixels += int(np.count_nonzero(new != mask))
-                current[k] = PackedMask(new)
-            count += current[k].count
-            views((k + 1) / len(cameras), "agreeing masks")
+        pixels, count, left_alone = _agree_views(cameras, current, evidence, voxels, settings,
+                                                 part.part(0.6, 1.0), cancel)
         changed.append(pixels)
         log.debug("agreement round %d: %d pixels changed", number + 1, pixels)
         if (pixels <= settings.min_change * max(count, 1)
                 or (len(changed) > 1 and pixels >= changed[-2])):
             break
     stage(1.0, "masks agreed")
+    report = _report(cameras, given, current, junctions, changed, left_alone, segmentation,
+                     packed)
+    log.debug(report.summary())
+    return (current if packed else [mask() for mask in current]), report
+
+
+def _checked_inputs(cameras, masks, evidence, junctions):
+    """The masks packed and the evidence as a list, one of each per camera (a ValueError
+    otherwise)."""
+    given = [_packed(item) for item in masks]
+    if len(given) != len(cameras):
+        raise ValueError(f"{len(given)} masks for {len(cameras)} cameras")
+    for camera, mask in zip(cameras, given):
+        if mask.shape != (camera.height, camera.width):
+            raise ValueError(f"the mask of {camera.name!r} is {mask.shape[1]}x{mask.shape[0]}, "
+                             f"its image {camera.width}x{camera.height}")
+    evidence = [None] * len(cameras) if evidence is None else list(evidence)
+    if len(evidence) != len(cameras):
+        raise ValueError(f"{len(evidence)} evidence maps for {len(cameras)} cameras")
+    if junctions is not None and len(junctions) != len(cameras):
+        raise ValueError(f"{len(junctions)} junction maps for {len(cameras)} cameras")
+    return given, evidence
+
+
+def _agree_views(cameras, current, evidence, voxels, settings, progress, cancel):
+    """One round: every view's mask agreed with the voxels (``current`` updated in place);
+    ``(pixels changed, cable pixels now, views left alone)``."""
+    pixels, count, left_alone = 0, 0, []
+    for k, camera in enumerate(cameras):
+        check_cancel(cancel, "the mask agreement")
+        mask = current[k]()
+        new, judged = _agree_view(camera, mask, unpacked(evidence[k], np.float32), voxels,
+                                  settings)
+        if not judged:
+            left_alone.append(camera.name)
+        elif new is not mask:
+            pixels += int(np.count_nonzero(new != mask))
+            current[k] = PackedMask(new)
+        count += current[k].count
+        progress((k + 1) / len(cameras), "agreeing masks")
+    return pixels, count, left_alone
+
+
+def _report(cameras, given, current, junctions, changed, left_alone, segmentation, packed):
+    """What the agreement did to each view, with its junction maps brought up to date."""
     removed, filled, updated = [], [], None if junctions is None else []
     for k, (before, after) in enumerate(zip(given, current)):
         old = before()
@@ -267,12 +288,10 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
         if junctions is not None:
             junction = _updated_junctions(unpacked(junctions[k]), old, new, segmentation)
             updated.append(PackedMask(junction) if packed else junction)
-    report = MaskAgreementReport(names=names, removed=tuple(removed), filled=tuple(filled),
-                                 rounds=len(changed), changed=tuple(changed),
-                                 left_alone=tuple(left_alone),
-                                 junctions=updated)
-    log.debug(report.summary())
-    return (current if packed else [mask() for mask in current]), report
+    return MaskAgreementReport(names=tuple(camera.name for camera in cameras),
+                               removed=tuple(removed), filled=tuple(filled),
+                               rounds=len(changed), changed=tuple(changed),
+                               left_alone=tuple(left_alone), junctions=updated)
 
 
 def _agreement_carving(carving, settings):
@@ -302,16 +321,7 @@ def _agree_view(camera, mask, evidence, voxels, settings):
                          f"{evidence.shape[0]}, its image {camera.width}x{camera.height}")
     if not mask.any():
         return mask, True  # nothing to remove, and no two pieces to bridge
-    pixels, depth = camera.project(voxels.points)
-    with np.errstate(invalid="ignore"):
-        col, row = np.floor(pixels[:, 0]), np.floor(pixels[:, 1])
-        seen = (depth > 0) & (col >= 0) & (row >= 0) & (col < camera.width) & (row < camera.height)
-    col = np.where(seen, col, 0).astype(np.int64)
-    row = np.where(seen, row, 0).astype(np.int64)
-    hit = seen & mask[row, col]
-    # leave one out: the other views' verdict on each voxel this view sees
-    others = voxels.visible - seen
-    agreement = np.where(others > 0, (voxels.hits - hit) / np.maximum(others, 1), 0.0)
+    seen, row, col, depth, agreement = _others_verdict(camera, mask, voxels)
     carved = seen & (agreement >= voxels.vote - 1e-9)
     if not carved.any():
         return mask, False
@@ -339,16 +349,8 @@ def _agree_view(camera, mask, evidence, voxels, settings):
 
     # pieces of the mask off the keep footprint that reach beyond all the others carve
     keep = carved & (agreement >= settings.keep_agreement - 1e-9)
-    doubtful = local & (distance(keep) > near)
-    kept = local
-    if doubtful.any():
-        count, labels = cv2.connectedComponents(doubtful.view(np.uint8), connectivity=8)
-        beyond = doubtful & (distance(carved) > far)
-        wrong = np.zeros(count, dtype=bool)
-        wrong[labels[beyond]] = True
-        wrong[0] = False
-        if wrong.any():
-            kept = local & ~wrong[labels]
+    kept = _without_strays(local, local & (distance(keep) > near),
+                           lambda: distance(carved) > far)
     total = int(np.count_nonzero(local))
     lost = total - int(np.count_nonzero(kept))
     if lost > settings.max_removed * total:
@@ -370,6 +372,34 @@ def _agree_view(camera, mask, evidence, voxels, settings):
     new = mask.copy()
     new[box] = filled
     return new, True
+
+
+def _others_verdict(camera, mask, voxels):
+    """Where the voxels fall in ``camera``'s view and what the other views say of each, leaving
+    this one out: ``(seen, row, col, depth, agreement)``, ``agreement`` the share of the other
+    views that see a voxel and put it on cable."""
+    pixels, depth = camera.project(voxels.points)
+    with np.errstate(invalid="ignore"):
+        col, row = np.floor(pixels[:, 0]), np.floor(pixels[:, 1])
+        seen = (depth > 0) & (col >= 0) & (row >= 0) & (col < camera.width) & (row < camera.height)
+    col = np.where(seen, col, 0).astype(np.int64)
+    row = np.where(seen, row, 0).astype(np.int64)
+    hit = seen & mask[row, col]
+    others = voxels.visible - seen
+    agreement = np.where(others > 0, (voxels.hits - hit) / np.maximum(others, 1), 0.0)
+    return seen, row, col, depth, agreement
+
+
+def _without_strays(local, doubtful, beyond):
+    """``local`` without its ``doubtful`` pieces that reach somewhere ``beyond()`` (a callable
+    giving a mask: only computed when some piece is doubtful)."""
+    if not doubtful.any():
+        return local
+    count, labels = cv2.connectedComponents(doubtful.view(np.uint8), connectivity=8)
+    wrong = np.zeros(count, dtype=bool)
+    wrong[labels[doubtful & beyond()]] = True
+    wrong[0] = False
+    return local & ~wrong[labels] if wrong.any() else local
 
 
 def _grown(mask, radius):
@@ -479,7 +509,6 @@ def _breaks(mask, footprint, evidence, width, settings):
                                                                connectivity=8)
     if count < 2:
         return None
-    longest = settings.max_gap * width
     reach = int(np.ceil(depth + 1.5))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
     bridge = np.zeros(mask.shape, dtype=bool)
@@ -515,24 +544,33 @@ def _breaks(mask, footprint, evidence, width, settings):
         local_evidence = None if evidence is None else evidence[window]
         for i in range(len(beside)):
             for j in range(i + 1, len(beside)):
-                length = float(distances[i][parts == beside[j]].min())
-                near = length + 2.0 * width + _spur(width)
-                if not ((ends[i] & (distances[j] <= near)).any()
-                        and (ends[j] & (distances[i] <= near)).any()):
-                    continue
-                if length <= longest:
-                    between = gap & _tube(parts == beside[i], parts == beside[j], distances[i],
-                                          distances[j], length, width)
-                    if local_evidence is not None:
-                        between &= local_evidence >= settings.background_evidence
-                elif local_evidence is not None:
-                    # within the ellipse around the gap that holds a bent stretch too
-                    between = (gap & (distances[i] + distances[j] <= 2.0 * length)
-                               & (local_evidence >= settings.fill_evidence))
-                else:
-                    continue
-                bridge[window] |= between
+                between = _between(parts, beside[[i, j]], distances[i], distances[j],
+                                   ends[i], ends[j], gap, local_evidence, width, settings)
+                if between is not None:
+                    bridge[window] |= between
     return bridge if bridge.any() else None
+
+
+def _between(parts, pair, distance_a, distance_b, ends_a, ends_b, gap, evidence, width,
+             settings):
+    """The fill between two pieces of the mask (labels ``pair`` in ``parts``) across the break
+    ``gap``, or None: both must end beside the break; a short break is filled with a tube
+    unless the evidence says background, a long one where the evidence says cable."""
+    length = float(distance_a[parts == pair[1]].min())
+    near = length + 2.0 * width + _spur(width)
+    if not ((ends_a & (distance_b <= near)).any() and (ends_b & (distance_a <= near)).any()):
+        return None
+    if length <= settings.max_gap * width:
+        between = gap & _tube(parts == pair[0], parts == pair[1], distance_a, distance_b,
+                              length, width)
+        if evidence is not None:
+            between &= evidence >= settings.background_evidence
+        return between
+    if evidence is None:
+        return None
+    # within the ellipse around the gap that holds a bent stretch too
+    return (gap & (distance_a + distance_b <= 2.0 * length)
+            & (evidence >= settings.fill_evidence))
 
 
 def _updated_junctions(junctions, given, agreed, segmentation):

@@ -53,7 +53,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded
 from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
-from ..geometry.arrays import as_points
+from ..geometry.arrays import as_points, read_only
 from ..progress import check_cancel
 
 __all__ = ["END_CONDITIONS", "RodSettings", "Rod", "Derivatives", "ElasticEnergy", "Load",
@@ -128,11 +128,6 @@ class RodSettings:
         return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
 
 
-def _frozen(array):
-    array.setflags(write=False)
-    return array
-
-
 @dataclass(frozen=True, eq=False)
 class Rod:
     """A rod's reference configuration, cross-section and ends.
@@ -188,9 +183,9 @@ class Rod:
         if not (np.all(np.isfinite(rest)) and np.all(rest > 0)):
             raise ValueError("rest lengths must be positive: no two consecutive points may "
                              "coincide")
-        object.__setattr__(self, "points", _frozen(points))
-        object.__setattr__(self, "radius", _frozen(radius))
-        object.__setattr__(self, "rest_lengths", _frozen(rest))
+        object.__setattr__(self, "points", read_only(points))
+        object.__setattr__(self, "radius", read_only(radius))
+        object.__setattr__(self, "rest_lengths", read_only(rest))
         object.__setattr__(self, "closed", bool(self.closed))
         object.__setattr__(self, "end_twist", float(self.end_twist))
 
@@ -822,7 +817,7 @@ def minimise_energy(terms, points, *, fixed=None, length_scale, settings=RodSett
     energies = {}
     for term, model in zip(terms, models):
         energies[term.name] = energies.get(term.name, 0.0) + model.energy(x)
-    return Equilibrium(points=_frozen(x), energy=float(sum(energies.values())),
+    return Equilibrium(points=read_only(x), energy=float(sum(energies.values())),
                        energies=energies, iterations=iterations, converged=converged)
 
 

@@ -44,6 +44,7 @@ from scipy.ndimage import gaussian_filter, gaussian_filter1d
 from scipy.spatial import cKDTree
 
 from ..geometry.camera import Camera
+from ..geometry.polylines import arc_length
 from ..progress import StageProgress
 from .rod import Derivatives, ElasticEnergy, Rod, RodSettings, minimise_energy
 from .segmentation import cable_width
@@ -835,13 +836,6 @@ class _ContactModel(_ClearanceModel):
 
 
 # -- the chain ---------------------------------------------------------------------------------
-def _arc(points, closed):
-    if closed:
-        points = np.vstack([points, points[:1]])
-    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    return np.concatenate([[0.0], np.cumsum(steps)])
-
-
 def resample_polyline(points, spacing, *, closed=False):
     """Evenly spaced points along a polyline, about ``spacing`` apart.
 
@@ -858,7 +852,7 @@ def resample_polyline(points, spacing, *, closed=False):
         Both ends kept for an open polyline; at least 2 points (3 when closed).
     """
     points = np.asarray(points, dtype=np.float64)
-    arc = _arc(points, closed)
+    arc = arc_length(points, closed=closed)
     length = arc[-1]
     edges = max(int(round(length / spacing)), 3 if closed else 1)
     targets = np.linspace(0.0, length, edges + 1)
@@ -1022,7 +1016,7 @@ def _check_inputs(points, radius, voxels, views, settings):
         raise ValueError("views must be ImageEvidence objects (ImageEvidence.from_mask)")
     if voxels is None and not views and settings.anchor_weight == 0:
         raise ValueError("nothing to fit to: give voxels, views or an anchor weight")
-    if _arc(points, False)[-1] <= settings.spacing * radius:
+    if arc_length(points)[-1] <= settings.spacing * radius:
         raise ValueError("the chain is shorter than one vertex spacing")
     return points
 
@@ -1100,8 +1094,8 @@ def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), obstacles=(),
         raise ValueError("up must be a non-zero 3-vector")
     radius = float(radius)
     chain = _initial_chain(points, radius, closed, settings)
-    input_arc = _arc(points, False)
-    input_arc = input_arc / (_arc(points, closed)[-1])
+    input_arc = arc_length(points)
+    input_arc = input_arc / (arc_length(points, closed=closed)[-1])
     pairs, warnings = _contact_pairs(tuple(contacts), input_arc, len(chain), closed, settings)
     obstacle_pairs = _obstacle_pairs(tuple(obstacles), input_arc, len(chain), closed, settings)
     rod_settings = RodSettings(youngs_modulus=_FIT_MODULUS, max_iterations=settings.max_iterations,
@@ -1120,7 +1114,7 @@ def fit_rod(points, radius, *, voxels=None, views=(), contacts=(), obstacles=(),
                                  progress=stage, cancel=cancel)
         current, iterations = np.array(result.points), iterations + result.iterations
         edges = len(current) if closed else len(current) - 1
-        rest = np.full(edges, _arc(current, closed)[-1] / edges)
+        rest = np.full(edges, arc_length(current, closed=closed)[-1] / edges)
     current.setflags(write=False)
     radii = np.full(len(current), radius)
     radii.setflags(write=False)

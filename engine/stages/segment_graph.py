@@ -41,6 +41,7 @@ from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
+from ..geometry.polylines import arc_length
 from ..progress import StageProgress, check_cancel
 from . import sparse_voxels
 
@@ -913,7 +914,7 @@ def _slab_centroids(line, voxels, scale, *, closed):
     left out, and so are the thin slabs at an open line's ends.
     """
     tangent = _tangents(line, max(1, int(round(scale.radius / scale.spacing))), closed=closed)
-    arc = _arc_length(line)
+    arc = arc_length(line)
     distance, nearest = cKDTree(line).query(voxels, distance_upper_bound=scale.slab)
     inside = np.isfinite(distance)
     voxels, nearest = voxels[inside], nearest[inside]
@@ -963,7 +964,7 @@ def _extend_ends(line, voxels, scale, targets, *, attach):
     junction's grown region are lopsided; with ``attach`` that end then curves into the
     junction.
     """
-    arc = _arc_length(line)
+    arc = arc_length(line)
     trims = [0.0 if target is None else scale.trim for target in targets]
     if len(line) < 3 or arc[-1] < sum(trims) + 2 * scale.end:  # too short to fit
         ends = [t[None] if attach and t is not None else np.zeros((0, 3)) for t in targets]
@@ -1007,7 +1008,7 @@ def _end_axis(points, scale, *, skip=0.0):
     A straight line is fitted to the points within 2 ``end_length`` around that point (from
     the start if it is closer than ``end_length`` to it).
     """
-    distance = _arc_length(points)
+    distance = arc_length(points)
     low = max(skip - scale.end, 0.0)
     window = (distance >= low) & (distance <= low + 2 * scale.end)
     if window.sum() < 3:  # too few points there: the last three (or all)
@@ -1023,12 +1024,6 @@ def _direction(points, scale):
     return -_end_axis(points, scale)[1]
 
 
-def _arc_length(points):
-    if len(points) == 0:
-        return np.zeros(0)
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-
-
 def _resample(points, spacing, *, closed):
     """Points evenly spaced about ``spacing`` apart along the line (ends kept if open)."""
     points = np.asarray(points, dtype=float).reshape(-1, 3)
@@ -1038,7 +1033,7 @@ def _resample(points, spacing, *, closed):
     if len(points) < 2:
         return points.copy()
     path = np.vstack([points, points[:1]]) if closed else points
-    arc = _arc_length(path)
+    arc = arc_length(path)
     count = max(int(round(arc[-1] / spacing)), 3 if closed else 1)
     at = np.linspace(0.0, arc[-1], count + 1)
     at = at[:-1] if closed else at
@@ -1063,5 +1058,5 @@ def _to_world(graph, origin, voxel_size):
         data["points"] = origin + data["points"] * voxel_size
         data["voxels"] = data["voxels"].astype(np.int64)
         path = np.vstack([data["points"], data["points"][:1]]) if data["closed"] else data["points"]
-        data["length"] = float(_arc_length(path)[-1])
+        data["length"] = float(arc_length(path)[-1])
     return graph

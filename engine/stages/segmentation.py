@@ -28,6 +28,7 @@ from .colour_model import (_HUE_APART, _HUED, ColourModel, _hue_gap, find_cable,
                            opened, range_of, reduced, thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
+from .union_find import DisjointSets
 
 #: Pixels darker than this (sum of R, G, B) have no reliable chromaticity.
 _CHROMA_FLOOR = 60
@@ -1053,19 +1054,11 @@ def junction_centres(mask, width, settings=SegmentationSettings()):
 def _merge_forks(clusters, max_link):
     """Centres of junction clusters (degree >= 3), the two forks of a shallow crossing merged."""
     junction = clusters.degree >= 3
-    parent = np.arange(len(junction))
-
-    def find(a):
-        while parent[a] != a:
-            a = parent[a]
-        return a
-
+    forks = DisjointSets(range(len(junction)))
     for a, b, length in clusters.links:
         if junction[a] and junction[b] and length < max_link:
-            parent[find(a)] = find(b)
-    groups = {}
-    for index in np.flatnonzero(junction):
-        groups.setdefault(find(index), []).append(index)
+            forks.union(int(a), int(b))
+    groups = forks.groups(int(index) for index in np.flatnonzero(junction))
     return [clusters.centres[members].mean(axis=0) for members in groups.values()]
 
 

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .union_find import DisjointSets
+
 __all__ = ["thin", "skeleton_clusters", "SkeletonClusters", "fill_small_holes"]
 
 # Neighbours in ring order P2..P9 of Zhang & Suen (1984): N, NE, E, SE, S, SW, W, NW.
@@ -38,20 +40,14 @@ def _component_table():
     table = np.zeros(256, dtype=np.uint8)
     for code in range(256):
         on = [k for k in range(8) if (code >> k) & 1]
-        parent = {k: k for k in on}
-
-        def find(a):
-            while parent[a] != a:
-                a = parent[a]
-            return a
-
+        pieces = DisjointSets(on)
         for a in on:
             for b in on:
                 step = (b - a) % 8
                 # ring neighbours touch; two edge neighbours (N, E, S, W) touch across a corner
                 if step == 1 or (step == 2 and a % 2 == 0):
-                    parent[find(a)] = find(b)
-        table[code] = len({find(k) for k in on})
+                    pieces.union(a, b)
+        table[code] = pieces.count
     return table
 
 

@@ -29,6 +29,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 from scipy.spatial import cKDTree
 
+from ..geometry.polylines import arc_length, unit
 from ..io.ground_truth import GroundTruth, TrueCrossing
 
 __all__ = ["LayoutSettings", "HARD_SETTINGS", "table_layout", "knot_layout", "hanging_layout",
@@ -84,8 +85,7 @@ def _arc_resample(points, spacing, closed=False):
     """Resample a polyline at equal arc-length ``spacing`` (keeps both ends of an open one)."""
     if closed:
         points = np.vstack([points, points[:1]])
-    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    arc = np.concatenate([[0.0], np.cumsum(steps)])
+    arc = arc_length(points)
     count = max(int(round(arc[-1] / spacing)), 2)
     targets = np.linspace(0.0, arc[-1], count + (0 if closed else 1), endpoint=not closed)
     return np.column_stack([np.interp(targets, arc, points[:, k])
@@ -671,8 +671,8 @@ def knot_layout(*, seed=0, radius=0.004, extent=None, settings=LayoutSettings())
                                        np.cos(t) - 2 * np.cos(2 * t)])
         spread = math.radians(rng.uniform(10.0, 35.0))  # the tails leave diverging
         tail_length = rng.uniform(0.45, 0.8) * bound
-        head = _tail(rng, knot[0], _unit(knot[0] - knot[1]), tail_length, spread)[::-1]
-        end = _tail(rng, knot[-1], _unit(knot[-1] - knot[-2]), tail_length, -spread)
+        head = _tail(rng, knot[0], unit(knot[0] - knot[1]), tail_length, spread)[::-1]
+        end = _tail(rng, knot[-1], unit(knot[-1] - knot[-2]), tail_length, -spread)
         flat = _arc_resample(np.vstack([head, knot, end]), SAMPLE_SPACING)
         angle = rng.uniform(0, 2 * np.pi)
         flat = flat @ np.array([[math.cos(angle), math.sin(angle)],
@@ -697,10 +697,6 @@ def knot_layout(*, seed=0, radius=0.004, extent=None, settings=LayoutSettings())
         if _check(lifted, found, settings, False) is None:
             return _finish(lifted, found, over_first, radius, False, "knot")
     raise LayoutError(f"no knot layout after {settings.max_tries} tries (seed {seed})")
-
-
-def _unit(vector):
-    return vector / np.linalg.norm(vector)
 
 
 def hanging_layout(*, seed=0, radius=0.004, extent=None, settings=LayoutSettings()):

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter, map_coordinates
 from scipy.spatial import cKDTree
 
+from ..geometry.polylines import arc_length
 from .looks import DEFAULT_LOOK, Look
 from .textures import legacy_wood_texture
 from .textures import table_texture as look_texture
@@ -481,8 +482,7 @@ def _sweep(truth):
     for number, (points, closed) in enumerate(truth.lines):
         if closed:
             points = np.vstack([points, points[:1]])
-        steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-        arc = np.concatenate([[0.0], np.cumsum(steps)])
+        arc = arc_length(points)
         samples = np.arange(0.0, arc[-1] + 1e-12, SPHERE_SPACING * truth.radius)
         if not closed and samples[-1] < arc[-1]:
             samples = np.append(samples, arc[-1])

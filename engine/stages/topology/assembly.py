@@ -6,10 +6,11 @@ import math
 import numpy as np
 
 from ...errors import ReconstructionError
+from ...geometry.polylines import arc_length
 from .junctions import logsumexp
 from .model import Topology, TopologyCrossing, TopologyPath
 from .one_path import slot_of
-from .polylines import add_bump, arc_length, at_arc, end_tangent, hermite
+from .polylines import add_bump, at_arc, end_tangent, hermite
 
 __all__ = ["assemble"]
 

@@ -4,9 +4,10 @@ import math
 
 import numpy as np
 
+from ...geometry.polylines import arc_length, unit
 from ..segment_graph import SegmentGraph
 from .model import TopologyView
-from .polylines import arc_length, end_tangent, unit
+from .polylines import end_tangent
 
 __all__ = ["as_view", "load", "Context", "close_gaps", "double_bigons"]
 

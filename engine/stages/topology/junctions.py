@@ -5,8 +5,9 @@ import itertools
 import math
 
 import numpy as np
+from ...geometry.polylines import arc_length
+from .polylines import at_arc, hermite
 
-from .polylines import arc_length, at_arc, hermite
 
 __all__ = ["Junction", "logsumexp"]
 

@@ -3,8 +3,8 @@
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from .polylines import add_bump
+
 
 __all__ = ["TopologyView", "TopologyPath", "TopologyCrossing", "Topology"]
 

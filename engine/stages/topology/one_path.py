@@ -7,6 +7,8 @@ import math
 import networkx as nx
 import numpy as np
 
+from ..union_find import DisjointSets
+
 __all__ = ["slot_of", "one_path_per_cable"]
 
 
@@ -44,24 +46,14 @@ class _Pieces:
         """``(pieces, fewest)`` for a combination (each junction's rank): spurs left unpaired
         are not counted (they are dropped); the fewest is one, or half the open ends (free
         ends and unpaired branches) when there are more than two."""
-        parent = list(range(self.count))
-
-        def root(k):
-            while parent[k] != k:
-                parent[k] = parent[parent[k]]
-                k = parent[k]
-            return k
-
-        pieces, open_ends, spurs = self.count, self.ends, 0
+        pieces = DisjointSets(range(self.count))
+        open_ends, spurs = self.ends, 0
         for links, unpaired, spur, rank in zip(self.links, self.unpaired, self.spurs, ranks):
             for a, b in links[rank]:
-                a, b = root(a), root(b)
-                if a != b:
-                    parent[a] = b
-                    pieces -= 1
+                pieces.union(a, b)
             open_ends += unpaired[rank]
             spurs += spur[rank]
-        return pieces - spurs, max(1, (open_ends - 2 * spurs) // 2)
+        return pieces.count - spurs, max(1, (open_ends - 2 * spurs) // 2)
 
 
 def one_path_per_cable(junctions, context, warnings):
@@ -75,7 +67,6 @@ def one_path_per_cable(junctions, context, warnings):
     for junction in junctions:
         junction.ranked = list(np.argsort(-junction.matching_log_p, kind="stable"))
     choice, marginals = {}, {}
-    budget, window = context.settings.search_budget, context.settings.search_window
     for component in _components(g):
         edges = [(d["start"], d["end"], k) for u, v, k, d in g.subgraph(component).edges(
             keys=True, data=True)]
@@ -85,40 +76,15 @@ def one_path_per_cable(junctions, context, warnings):
             continue
         logs = [[float(v) for v in j.matching_log_p[j.ranked]] for j in members]
         count_pieces = _Pieces(edges, ends, members)
-
-        def total(ranks):
-            return float(sum(log[k] for log, k in zip(logs, ranks)))
-
-        def valid(ranks):
-            pieces, fewest = count_pieces(ranks)
-            return pieces <= fewest
-
+        found, tried = _best_first(logs, count_pieces, context.settings)
         start = tuple(0 for _ in members)
-        heap = [(-total(start), start)]
-        seen = {start}
-        found = []
-        tried = 0
-        while heap and tried < budget:
-            negative, ranks = heapq.heappop(heap)
-            tried += 1
-            if found and -negative < found[0][0] - window:
-                break
-            if valid(ranks):
-                found.append((-negative, ranks))
-            for k in range(len(members)):
-                if ranks[k] + 1 < len(logs[k]) and math.isfinite(logs[k][ranks[k] + 1]):
-                    step = ranks[:k] + (ranks[k] + 1,) + ranks[k + 1:]
-                    if step not in seen:
-                        seen.add(step)  # one rank down at one junction: its score moves
-                        heapq.heappush(heap, (negative + logs[k][ranks[k]]
-                                              - logs[k][ranks[k] + 1], step))
         if not found:
             pieces, fewest = count_pieces(start)
             warnings.append(
                 f"no pairing at junction(s) {', '.join(str(j.node) for j in members)} "
                 f"(of {tried} tried) joins their cable into {fewest} path(s): kept as "
                 f"{pieces}")
-            found = [(total(start), start)]
+            found = [(float(sum(log[0] for log in logs)), start)]
         best = found[0][1]
         if best != start:
             changed = [str(j.node) for j, k in zip(members, best) if k != 0]
@@ -134,6 +100,37 @@ def one_path_per_cable(junctions, context, warnings):
             marginals[junction.node] = float(sum(w for w, (_, ranks) in zip(weights, found)
                                                  if ranks[k] == chosen))
     return choice, marginals
+
+
+def _best_first(logs, count_pieces, settings):
+    """Combinations of the junctions' matchings (each junction's rank in ``logs``, its ranked
+    log-probabilities) that give as few paths as the free ends allow, best first: at most
+    ``search_budget`` tried, none more than ``search_window`` below the best found. Returns
+    ``(found, tried)``, ``found`` a list of ``(log-probability, ranks)``."""
+    def total(ranks):
+        return float(sum(log[k] for log, k in zip(logs, ranks)))
+
+    start = tuple(0 for _ in logs)
+    heap = [(-total(start), start)]
+    seen = {start}
+    found = []
+    tried = 0
+    while heap and tried < settings.search_budget:
+        negative, ranks = heapq.heappop(heap)
+        tried += 1
+        if found and -negative < found[0][0] - settings.search_window:
+            break
+        pieces, fewest = count_pieces(ranks)
+        if pieces <= fewest:
+            found.append((-negative, ranks))
+        for k in range(len(logs)):
+            if ranks[k] + 1 < len(logs[k]) and math.isfinite(logs[k][ranks[k] + 1]):
+                step = ranks[:k] + (ranks[k] + 1,) + ranks[k + 1:]
+                if step not in seen:
+                    seen.add(step)  # one rank down at one junction: its score moves
+                    heapq.heappush(heap, (negative + logs[k][ranks[k]]
+                                          - logs[k][ranks[k] + 1], step))
+    return found, tried
 
 
 def _components(g):

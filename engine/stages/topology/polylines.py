@@ -1,27 +1,17 @@
-"""Polylines along the cable: arc length, points at an arc position, end tangents, smooth
-bridges and the bump that lifts a strand over another."""
-
+"""Polylines along the cable: points at an arc position, end tangents, smooth bridges and
+the bump that lifts a strand over another."""
 
 import numpy as np
 
-__all__ = ["arc_length", "at_arc", "unit", "hermite", "end_tangent", "add_bump"]
+from ...geometry.polylines import arc_length
 
-
-def arc_length(points):
-    if len(points) < 2:
-        return np.zeros(len(points))
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+__all__ = ["at_arc", "hermite", "end_tangent", "add_bump"]
 
 
 def at_arc(points, arc, s):
     """Point at arc length ``s`` along a polyline (clamped)."""
     s = min(max(s, 0.0), arc[-1])
     return np.array([np.interp(s, arc, points[:, k]) for k in range(3)])
-
-
-def unit(vector):
-    norm = np.linalg.norm(vector)
-    return vector / norm if norm > 0 else np.zeros_like(vector)
 
 
 def hermite(p0, m0, p1, m1, samples):
