@@ -11,8 +11,9 @@ from pathlib import Path
 
 import bpy
 
-from ..engine.cli.main import (EXIT_BAD_INPUT, ProgressBar, add_reconstruct_arguments,
-                               reconstruct_arguments, run_with_exit_code)
+from ..engine.cli.main import (EXIT_BAD_INPUT, RECONSTRUCT_USAGE, ProgressBar,
+                               add_reconstruct_arguments, reconstruct_arguments,
+                               run_with_exit_code)
 from ..engine.cli.settings import add_settings_arguments, settings_from_arguments
 from ..engine.errors import InputError, OutputError
 from ..engine.io.files import check_output_file
@@ -32,6 +33,8 @@ def build_parser():
                     "(and the cameras) in a collection named after the images' folder.")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     rebuild = commands.add_parser("reconstruct", help="images to a .blend",
+                                  usage=f"%(prog)s IMAGES -o BLEND [--no-cameras] "
+                                        f"{RECONSTRUCT_USAGE}",
                                   description="Images to a .blend with the cable's curve.")
     add_reconstruct_arguments(rebuild)
     rebuild.add_argument("-o", "--output", required=True, metavar="BLEND",
@@ -41,7 +44,7 @@ def build_parser():
     rebuild.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     rebuild.add_argument("--debug", action="store_true",
                          help="an internal error shows its traceback (and is not caught)")
-    add_settings_arguments(rebuild, BezierSettings)
+    add_settings_arguments(rebuild, BezierSettings, prefix="curve", aliases=True)
     return parser
 
 
@@ -56,7 +59,8 @@ def _reconstruct(args):
         images=images, name=sequence_name(images), cameras=engine["cameras"],
         masks=engine["masks"], hsv=str(engine["colour"]) if engine["colour"] else None,
         diameter=engine["diameter"], length=engine["length"], settings=engine["settings"],
-        curve=settings_from_arguments(BezierSettings, args), with_cameras=not args.no_cameras)
+        curve=settings_from_arguments(BezierSettings, args, prefix="curve"),
+        with_cameras=not args.no_cameras)
     progress = (lambda fraction, message: None) if args.quiet else ProgressBar()
     outcome = reconstruct_work(request)(progress, None)
     obj = apply_outcome(bpy.context, request, outcome)

@@ -1,4 +1,5 @@
-"""Operators: Reconstruct, Flip Crossing, the cable colour (pick, automatic), the preview.
+"""Operators: Reconstruct, Flip Crossing, Save Run Settings, the cable colour (pick, automatic),
+the preview.
 
 Reconstruct and Flip Crossing have two modes, as Blender's own extension add-on does:
 ``execute()`` blocks (scripts, tests, background mode); ``invoke()`` runs the engine on a
@@ -9,9 +10,11 @@ undo step.
 """
 
 import bpy
-from bpy.props import CollectionProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, CollectionProperty, IntProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper
 
 from ..engine.errors import Cancelled, InputError, ReconstructionError
+from ..engine.pipeline import write_run
 from ..engine.stages.segmentation import auto_colour, colour_at
 from .background_job import CANCELLED, FAILED, FINISHED, RUNNING, BackgroundJob, ModalRun, \
     step_of
@@ -327,6 +330,42 @@ class CABLE_RECON_FH_images(bpy.types.FileHandler):
         return context.area is not None and context.area.type == "VIEW_3D"
 
 
-CLASSES = (CABLE_RECON_OT_reconstruct, CABLE_RECON_OT_flip_crossing,
+class CABLE_RECON_OT_save_run(bpy.types.Operator, ExportHelper):
+    """Save the settings, colour and scale this curve was made with, for the command line:
+    python -m engine reconstruct IMAGES --settings FILE repeats the run"""
+
+    bl_idname = "cable_recon.save_run"
+    bl_label = "Save Run Settings"
+    filename_ext = ".json"
+    filter_glob: StringProperty(default="*.json", options={"HIDDEN"})
+    overwrite: BoolProperty(
+        name="Overwrite", default=False, options={"HIDDEN", "SKIP_SAVE"},
+        description="Replace an existing file (the file browser asks before it does)")
+
+    @classmethod
+    def poll(cls, context):
+        return _result_object(context) is not None
+
+    def invoke(self, context, event):
+        self.overwrite = True  # chosen in the file browser, which marks an existing file
+        return ExportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        request = RunRequest.from_json(_result_object(context).cable_recon.arguments)
+        try:
+            path = write_run(self.filepath, request.settings, request.inputs(),
+                             overwrite=self.overwrite)
+        except FileExistsError:
+            self.report({"ERROR"}, f"{self.filepath} already exists: choose another name")
+            return {"CANCELLED"}
+        except (InputError, OSError) as error:
+            self.report({"ERROR"}, f"cannot write {self.filepath}: {error}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Run settings saved to {path}: python -m engine reconstruct "
+                              f"IMAGES --settings {path.name} repeats it")
+        return {"FINISHED"}
+
+
+CLASSES = (CABLE_RECON_OT_reconstruct, CABLE_RECON_OT_flip_crossing, CABLE_RECON_OT_save_run,
            CABLE_RECON_OT_pick_colour, CABLE_RECON_OT_auto_colour,
            CABLE_RECON_OT_show_preview, CABLE_RECON_OT_set_images, CABLE_RECON_FH_images)

@@ -128,6 +128,7 @@ class VIEW3D_PT_cable_recon_crossings(_CablePanel, bpy.types.Panel):
         props = context.active_object.cable_recon
         layout.label(text=f"{props.control_points} control points, within "
                           f"{props.max_error:.2f} r of the reconstruction")
+        layout.operator("cable_recon.save_run", icon="EXPORT")
         if not props.crossings:
             layout.label(text="No crossings")
             return

@@ -14,7 +14,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        FloatVectorProperty, IntProperty, IntVectorProperty, PointerProperty,
                        StringProperty)
 
-from ..engine.pipeline import PipelineSettings
+from ..engine.pipeline import PipelineSettings, RunInputs
 from ..engine.stages.bezier import BezierSettings
 from ..engine.stages.segmentation import ColourRange
 from .settings_properties import property_group_for, settings_from_group
@@ -41,7 +41,7 @@ _GROUP_CLASSES = tuple(property_group_for(cls, f"CABLE_RECON_PG_{name}",
                                           else None)
                        for name, _, cls in QUALITY_GROUPS)
 
-_DEFAULT_COLOUR = ColourRange((170, 80, 40), (10, 255, 255))
+_DEFAULT_COLOUR = ColourRange.parse(RunInputs.PANEL_HSV)
 
 
 class CABLE_RECON_PG_settings(bpy.types.PropertyGroup):
@@ -84,10 +84,10 @@ class CABLE_RECON_PG_settings(bpy.types.PropertyGroup):
                ("DIAMETER", "Diameter", "The cable's measured diameter gives metres"),
                ("LENGTH", "Length", "The cable's length gives metres")])
     diameter: FloatProperty(
-        name="Diameter (mm)", min=0.01, default=5.0, precision=2,
+        name="Diameter (mm)", min=0.01, default=RunInputs.PANEL_DIAMETER, precision=2,
         description="The cable's diameter in millimetres (calipers)")
     length: FloatProperty(
-        name="Length (m)", min=0.001, default=1.0, precision=3,
+        name="Length (m)", min=0.001, default=RunInputs.PANEL_LENGTH, precision=3,
         description="The cable's length in metres")
     with_cameras: BoolProperty(
         name="Cameras", default=True, description="Add the cameras as camera objects")

@@ -17,8 +17,9 @@ from pathlib import Path
 import bpy
 
 from ..engine.errors import InputError
-from ..engine.pipeline import PipelineSettings, run_reconstruction
+from ..engine.pipeline import PipelineSettings, RunInputs, run_reconstruction
 from ..engine.progress import StageProgress
+from ..engine.settings import settings_from_dict
 from ..engine.stages.bezier import BezierSettings, fit_result_curves
 from ..engine.stages.segmentation import ColourRange
 from .mask_preview import frame_paths
@@ -84,24 +85,14 @@ class RunRequest:
     def from_json(cls, text):
         """The request stored by :meth:`to_json`."""
         data = json.loads(text)
-        data["settings"] = _dataclass_from_dict(PipelineSettings, data["settings"])
-        data["curve"] = _dataclass_from_dict(BezierSettings, data["curve"])
+        # a curve made by an earlier version may name settings since moved or merged
+        data["settings"] = settings_from_dict(PipelineSettings, data["settings"], strict=False)
+        data["curve"] = settings_from_dict(BezierSettings, data["curve"], strict=False)
         return cls(**data)
 
-
-def _dataclass_from_dict(cls, data):
-    values = {}
-    for item in dataclasses.fields(cls):
-        if item.name not in data:
-            continue
-        value = data[item.name]
-        factory = item.default_factory
-        if factory is not dataclasses.MISSING and dataclasses.is_dataclass(factory):
-            value = _dataclass_from_dict(factory, value)
-        elif isinstance(value, list):
-            value = tuple(value)
-        values[item.name] = value
-    return cls(**values)
+    def inputs(self):
+        """The colour and scale given, as a run records them."""
+        return RunInputs(hsv=self.hsv, diameter=self.diameter, length=self.length)
 
 
 @dataclass(frozen=True, eq=False)

@@ -30,7 +30,7 @@ _LAZY = {
     "ImageEvidence": "stages.rod_fit", "Contact": "stages.rod_fit", "Voxels": "stages.rod_fit",
     "TopologySettings": "stages.topology", "resolve_topology": "stages.topology",
     "PipelineSettings": "pipeline", "Reconstruction": "pipeline", "reconstruct": "pipeline",
-    "run_reconstruction": "pipeline",
+    "run_reconstruction": "pipeline", "RunInputs": "pipeline", "read_run": "pipeline",
 }
 
 __all__ = [

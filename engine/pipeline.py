@@ -16,9 +16,10 @@ Stages, each timed in the result (the README's data flow)::
                                ``length`` scales the world to metres
 """
 
+import json
 import logging
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -28,10 +29,12 @@ from .errors import InputError, ReconstructionError
 from .geometry.similarity import Similarity
 from .geometry.upright import UprightSettings, make_upright
 from .io.colmap import read_colmap_model
+from .io.files import write_atomic
 from .io.image_sequence import open_image_sequence, read_image
 from .io.packed_mask import PackedMask, unpacked
 from .io.result import CablePath, Crossing, Result, StrandRef
 from .progress import StageProgress, check_cancel
+from .settings import settings_from_dict, settings_to_dict
 from .stages.cameras import CameraEstimationSettings, estimate_cameras
 from .stages.carving import CarvingSettings, carve
 from .stages.mask_agreement import MaskAgreementSettings, agree_masks
@@ -42,8 +45,10 @@ from .stages.segmentation import (ColourRange, SegmentationSettings, cable_width
                                   reference_frames, segment_frame, sequence_colour)
 from .stages.topology import TopologySettings, resolve_topology
 
-__all__ = ["PipelineSettings", "View", "Reconstruction", "reconstruct", "run_reconstruction",
-           "measure_radius", "read_masks", "cable_colour", "path_colours", "sequence_cameras"]
+__all__ = ["PipelineSettings", "RunInputs", "View", "Reconstruction", "reconstruct",
+           "run_reconstruction", "read_run", "write_run", "run_record", "RUN_FORMAT",
+           "measure_radius", "read_masks", "cable_colour",
+           "path_colours", "sequence_cameras"]
 
 log = logging.getLogger(__name__)
 
@@ -72,8 +77,8 @@ class PipelineSettings:
     topology : TopologySettings
     fit : RodFitSettings
     upright : UprightSettings
-        How the world is put upright when the cameras come from a model (estimated cameras
-        are put upright by the estimation).
+        How the world is put upright (the table plane among the sparse points), for cameras
+        estimated or from a model alike.
     checks : MaskCheckSettings
         When the run warns that its masks held more than the cable.
     reference_frame : int
@@ -90,6 +95,42 @@ class PipelineSettings:
     upright: UprightSettings = field(default_factory=UprightSettings)
     checks: MaskCheckSettings = field(default_factory=MaskCheckSettings)
     reference_frame: int = 0
+
+
+@dataclass(frozen=True)
+class RunInputs:
+    """The colour and scale a run is given, besides its settings: what its result records
+    (:attr:`Result.run`) and ``--settings`` reads back.
+
+    Attributes
+    ----------
+    hsv : str or None
+        The colour range given (``"H1,S1,V1,H2,S2,V2"``); None: found automatically.
+    diameter : float or None
+        The cable's measured diameter in millimetres; None: not given.
+    length : float or None
+        The cable's length in metres; None: not given.
+    """
+
+    hsv: str = None
+    diameter: float = None
+    length: float = None
+
+    #: Where the panel's colour range starts before the user sets or picks one (a red cable).
+    PANEL_HSV = "170,80,40,10,255,255"
+    #: Where the panel's diameter (mm) and length (m) start before the user measures them.
+    PANEL_DIAMETER = 5.0
+    PANEL_LENGTH = 1.0
+
+    def __post_init__(self):
+        if self.hsv is not None:
+            ColourRange.parse(str(self.hsv))
+        for key in ("diameter", "length"):
+            value = getattr(self, key)
+            if value is not None and (isinstance(value, bool)
+                                      or not isinstance(value, (int, float))):
+                raise InputError(f"the {key} must be a number or null")
+        _check_scale(self.diameter, self.length)
 
 
 @dataclass(frozen=True, eq=False)
@@ -268,7 +309,7 @@ def _cameras(sequence, cameras, settings, stage, cancel):
     if cameras is None:
         estimate = estimate_cameras(sequence.paths, settings=settings.cameras,
                                     focal_length_px=sequence.focal_length_px,
-                                    progress=stage, cancel=cancel)
+                                    progress=stage, cancel=cancel, upright=settings.upright)
         if estimate.unregistered:
             warnings.append(f"{len(estimate.unregistered)} frame(s) did not register and were "
                             f"left out: {', '.join(estimate.unregistered)}")
@@ -458,6 +499,8 @@ class Reconstruction:
         Warnings of the stages before the fit.
     diameter, length : float or None
         The scale asked for.
+    hsv : str or None
+        The colour range asked for (``"H1,S1,V1,H2,S2,V2"``), None when found automatically.
     estimated : bool
         The cameras were estimated (so the scale is arbitrary unless asked for).
     colour : tuple of float or None
@@ -480,6 +523,7 @@ class Reconstruction:
     warnings: tuple
     diameter: float = None
     length: float = None
+    hsv: str = None
     estimated: bool = False
     colour: tuple = None
     path_colours: tuple = ()
@@ -513,6 +557,87 @@ class Reconstruction:
         clock.done()
         result, unexplained = _finish(fits, crossings, self, clock)
         return replace(self, result=result, checks={**self.checks, "unexplained": unexplained})
+
+
+#: The format of a run file (the settings and inputs of a run, without its result).
+RUN_FORMAT = "cable_recon.run/1"
+
+
+def run_record(settings, inputs):
+    """What a result records of its run (:attr:`Result.run`): every stage's settings and the
+    colour and scale given.
+
+    Parameters
+    ----------
+    settings : PipelineSettings
+    inputs : RunInputs
+
+    Returns
+    -------
+    dict
+    """
+    return {"settings": settings_to_dict(settings), "inputs": asdict(inputs)}
+
+
+def write_run(path, settings, inputs, *, overwrite=False):
+    """Write a run file (``"format": "cable_recon.run/1"``): what ``reconstruct --settings``
+    reads to repeat a run made elsewhere (in Blender).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    settings : PipelineSettings
+    inputs : RunInputs
+    overwrite : bool, optional
+        Replace an existing file (:class:`FileExistsError` otherwise).
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    document = {"format": RUN_FORMAT, "run": run_record(settings, inputs)}
+    return write_atomic(path, json.dumps(document, indent=1) + "\n", overwrite=overwrite)
+
+
+def read_run(path):
+    """The settings and inputs a run was made with, from its result file (or a run file the
+    add-on saves): ``(settings, inputs)``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A JSON file holding a ``"run"`` object (:attr:`Result.run`).
+
+    Returns
+    -------
+    settings : PipelineSettings
+    inputs : RunInputs
+
+    Raises
+    ------
+    InputError
+        The file cannot be read, holds no run, or a setting or input does not fit.
+    """
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except OSError as error:
+        raise InputError(f"cannot read {path}: {error.strerror or error}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise InputError(f"{path} is not a JSON file: {error}") from None
+    run = data.get("run") if isinstance(data, dict) else None
+    if not isinstance(run, dict):
+        raise InputError(f"{path} records no run (a result written by this version, or a run "
+                         "file saved in Blender, has one)")
+    settings = settings_from_dict(PipelineSettings, run.get("settings", {}),
+                                  f"{path}: run.settings")
+    inputs = run.get("inputs", {})
+    if not isinstance(inputs, dict) or set(inputs) - {"hsv", "diameter", "length"}:
+        raise InputError(f"{path}: run.inputs holds hsv, diameter and length only")
+    try:
+        return settings, RunInputs(**inputs)
+    except (InputError, ValueError) as error:
+        raise InputError(f"{path}: run.inputs: {error}") from None
 
 
 def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diameter=None,
@@ -559,6 +684,7 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
     _check_scale(diameter, length)
     if colour is not None and not isinstance(colour, ColourRange):
         colour = ColourRange.parse(str(colour))
+    hsv = None if colour is None else str(colour)
     agree = masks is None and settings.agreement.rounds > 0
     stages = ["masks", "cameras"] + (["agreement"] if agree else []) + [
         "carving", "graph", "topology", "fit"]
@@ -580,7 +706,7 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
     state = Reconstruction(
         result=None, views=tuple(views), topology=topology, evidence=tuple(evidence),
         voxels=voxels, carved_radius=grid.radius, up=up, settings=settings,
-        warnings=tuple(warnings), diameter=diameter, length=length,
+        warnings=tuple(warnings), diameter=diameter, length=length, hsv=hsv,
         estimated=cameras is None, colour=colour_seen, path_colours=colours,
         checks={"core_thickness": thickness})
     return state._fitted(clock, stage, cancel)
@@ -753,6 +879,7 @@ def _finish(fits, crossings, state, clock):
     paths = [CablePath(points, closed=fit.closed, colour=colour)
              for points, fit, colour in zip(fits_points, fits, colours)]
     clock.progress(1.0, "done")
+    run = run_record(state.settings, RunInputs(state.hsv, state.diameter, state.length))
     return Result(radius=radius, paths=paths, crossings=crossings, cameras=cameras, units=units,
                   warnings=warnings, timings=dict(clock.timings),
-                  colour=state.colour), unexplained
+                  colour=state.colour, run=run), unexplained

@@ -72,6 +72,48 @@ def test_settings_come_from_the_engine_and_are_saved_in_the_blend(empty_scene, t
     assert pipeline_settings(reopened).carving.voxels_per_radius == 5
 
 
+def test_the_panels_limits_and_defaults_are_the_engines(empty_scene):
+    from cable_reconstruction.engine.pipeline import RunInputs
+
+    settings = empty_scene.cable_recon
+    vote = settings.carving.bl_rna.properties["vote"]
+    assert vote.hard_max == 1.0 and 0.0 < vote.hard_min < 1e-5  # (0, 1]
+    assert "> 0 and <= 1" in vote.description
+    assert settings.topology.bl_rna.properties["max_degree"].hard_min == 2
+    assert "r)" in settings.topology.bl_rna.properties["spur_length"].description  # its unit
+    settings.carving.vote = 5.0  # Blender clamps to the engine's range
+    assert settings.carving.vote == 1.0
+    assert settings.diameter == pytest.approx(RunInputs.PANEL_DIAMETER)
+    assert ",".join(map(str, (*settings.hsv_low, *settings.hsv_high))) == RunInputs.PANEL_HSV
+
+
+def test_a_run_made_in_blender_repeats_from_the_command_line(empty_scene, capture, tmp_path):
+    from cable_reconstruction.addon.reconstruction import sessions
+    from engine.cli.main import main
+    from engine.io.result import read_result
+
+    settings = configure(empty_scene, capture, with_cameras=False, scale="DIAMETER",
+                         diameter=6.0)
+    settings.carving.voxels_per_radius = 2.5
+    settings.fit.passes = 1
+    assert bpy.ops.cable_recon.reconstruct() == {"FINISHED"}
+    obj = bpy.data.objects["twist"]
+    made = sessions[obj.cable_recon.run].result
+    path = tmp_path / "twist.run.json"
+    assert bpy.ops.cable_recon.save_run(filepath=str(path)) == {"FINISHED"}
+    with pytest.raises(RuntimeError, match="already exists"):  # never over a file unasked
+        bpy.ops.cable_recon.save_run(filepath=str(path))
+    assert main(["-q", "reconstruct", str(capture / "images"), "--cameras",
+                 str(capture / "sparse"), "--settings", str(path),
+                 "-o", str(tmp_path / "again.json")]) == 0
+    again = read_result(tmp_path / "again.json")
+    assert again.run == made.run and again.units == "m"
+    assert again.run["settings"]["carving"]["voxels_per_radius"] == 2.5
+    assert again.radius == made.radius
+    for a, b in zip(made.paths, again.paths):
+        assert (a.points == b.points).all()
+
+
 def test_live_preview_is_the_engines_mask_and_follows_the_colour(empty_scene, capture):
     from cable_reconstruction.addon.mask_preview import PREVIEW_IMAGE, refresh_preview
 

@@ -18,8 +18,8 @@ BLENDER_MODULES = {"bpy", "bpy_extras", "mathutils", "bmesh", "gpu", "blf", "add
 #: Developer code: never imported by the runtime, never in the extension's zip.
 DEVELOPER = ("engine.synthetic", "engine.evaluation", "engine.bench")
 #: The runtime's packages in the data flow's order: a module imports only from its own rank or
-#: an earlier one (errors and progress are what every rank reports with).
-RANKS = {"engine.errors": 0, "engine.progress": 0, "engine.__version__": 0,
+#: an earlier one (errors, progress and settings are what every rank reports and is tuned with).
+RANKS = {"engine.errors": 0, "engine.progress": 0, "engine.settings": 0, "engine.__version__": 0,
          "engine.geometry": 1, "engine.io": 2,
          "engine.stages": 3, "engine.pipeline": 4, "engine.cli": 5, "engine": 6,
          "engine.__main__": 6}

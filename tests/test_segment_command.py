@@ -136,6 +136,13 @@ def test_format_table():
     assert table.splitlines() == ["| scene | iou | n |", "|---|---|---|", "| a | 0.912 | 3 |"]
 
 
+def test_a_failed_row_shows_its_error_whatever_the_first_row_held():
+    rows = [{"scene": "a", "iou": 0.5}, {"scene": "b", "error": "no cable | found"}]
+    assert format_table(rows).splitlines()[0] == "| scene | iou | error |"
+    assert format_table(rows).splitlines()[-1] == "| b |  | no cable / found |"
+    assert format_table(rows, ["scene"]).splitlines()[-1] == "| b | no cable / found |"
+
+
 def test_segment_all_cables_writes_every_cable(tmp_path):
     from engine.synthetic.scene import look_scene
 

@@ -8,7 +8,9 @@ the crossings, segments 2N+1 for an open cable) and how far the segments' centre
 the true one, in radii. Each scene has two rows: *ours*, carved as a reconstruction carves
 (the radius estimated from the masks, the voxel size the settings' own), and an *oracle* row
 fed the truth (256 voxels along the longest side of the cable's box, the issue's measure, with
-the true radius). The last row carves 200 views of 3840x2880 for memory alone.
+the true radius). Each family (a table with 3, 6 and 8 crossings, a closed loop, an overhand
+knot) has a scene per seed, then its mean and worst. The last row carves 200 views of
+3840x2880 for memory alone.
 """
 
 import tempfile
@@ -136,6 +138,27 @@ def _scene_rows(specs, settings, folder, cells):
     return rows
 
 
+#: What the mean and worst rows summarise (the worst is the largest of each).
+_SPREAD = ("carve_s", "graph_s", "chain_mean_r", "chain_p95_r")
+
+
+def _spread(family, rows):
+    """Each grid's mean and worst over a family's scenes, the crossings found summed."""
+    summary = []
+    for grid in dict.fromkeys(row["grid_from"] for row in rows):
+        done = [row for row in rows if row["grid_from"] == grid and "error" not in row]
+        if not done:
+            continue
+        found = (f"{sum(row['crossings_found'] for row in done)}/"
+                 f"{sum(row['crossings'] for row in done)}")
+        for name, pick in (("mean", np.mean), ("worst", np.max)):
+            summary.append({"scene": f"{family}: {name} of {len(done)}", "grid_from": grid,
+                            **{key: float(pick([row[key] for row in done]))
+                               for key in _SPREAD if all(key in row for row in done)},
+                            "crossings_found": found})
+    return summary
+
+
 def _memory_row(settings, folder, views=200):
     """200 views at 4x the size: 50 rendered masks, each used by 4 cameras at 4x resolution."""
     spec = SceneSpec(crossings=3, seed=1, views=50)
@@ -158,13 +181,23 @@ def _memory_row(settings, folder, views=200):
     return row
 
 
-def bench_carve(*, views=30, settings=CarvingSettings(), cells=256, memory=True):
+#: The scene families: (label, SceneSpec options).
+FAMILIES = (("table 3", dict(crossings=3)), ("table 6", dict(crossings=6)),
+            ("table 8", dict(crossings=8)), ("loop 4", dict(kind="loop", crossings=4)),
+            ("knot", dict(kind="knot")))
+
+
+def bench_carve(*, views=30, seeds=(1, 2, 3), settings=CarvingSettings(), cells=256,
+                memory=True):
     """Carving and segment graph rows (see the module notes).
 
     Parameters
     ----------
     views : int, optional
         Views per scene.
+    seeds : sequence of int, optional
+        One scene per seed and family; with more than one, each family's rows are followed by
+        their mean and worst.
     settings : CarvingSettings, optional
     cells : int, optional
         Each scene is carved as a reconstruction carves it (the radius estimated from the
@@ -178,13 +211,13 @@ def bench_carve(*, views=30, settings=CarvingSettings(), cells=256, memory=True)
     -------
     list of dict
     """
-    specs = [("table 3", SceneSpec(crossings=3, seed=1, views=views)),
-             ("table 6", SceneSpec(crossings=6, seed=2, views=views)),
-             ("table 8", SceneSpec(crossings=8, seed=5, views=views)),
-             ("loop 4", SceneSpec(kind="loop", crossings=4, seed=6, views=views)),
-             ("knot", SceneSpec(kind="knot", seed=4, views=views))]
+    rows = []
     with tempfile.TemporaryDirectory(prefix="bench_carve_") as folder:
-        rows = _scene_rows(specs, settings, folder, cells)
+        for family, options in FAMILIES:
+            specs = [(f"{family} seed {seed}", SceneSpec(seed=seed, views=views, **options))
+                     for seed in seeds]
+            found = _scene_rows(specs, settings, folder, cells)
+            rows += found + (_spread(family, found) if len(seeds) > 1 else [])
         if memory:
             memory_folder = Path(folder) / "memory"
             memory_folder.mkdir()

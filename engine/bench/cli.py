@@ -19,7 +19,7 @@ def add_bench_command(commands, *, parents=()):
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--seeds", type=int, default=3,
                        help="scenes per family and seed set (looks, pipeline-looks, "
-                            "topology)")
+                            "topology), per family (carve) or of the pipeline (rod)")
     bench.add_argument("--families", metavar="NAMES",
                        help="comma-separated families: look families (looks, pipeline-looks: "
                             "those only, without the Cycles captures and real photos) or "
@@ -80,11 +80,11 @@ def run_bench(args):
     elif args.stage == "carve":
         from .carve import bench_carve
 
-        rows = bench_carve(views=args.views)
+        rows = bench_carve(views=args.views, seeds=tuple(range(1, args.seeds + 1)))
     elif args.stage == "rod":
         from .rod import bench_rod
 
-        rows = bench_rod()
+        rows = bench_rod(seeds=tuple(range(args.seeds)))
     elif args.stage in ("preview", "curve", "cancel"):
         from . import interactive
 

@@ -13,16 +13,22 @@ DEFAULT_SAMPLE = Path("samples") / "sequence"
 
 
 def format_table(rows, columns=None):
-    """Rows of dicts as a Markdown table (floats with 3 digits)."""
-    columns = columns or list(rows[0])
+    """Rows of dicts as a Markdown table (floats with 3 digits).
+
+    The columns are ``columns`` (and ``error`` when a row failed: a failed row is never a row
+    of blank cells), or else every key of every row in the order first seen.
+    """
+    seen = list(columns or [])
+    for row in rows:
+        seen += [key for key in row if key not in seen and (not columns or key == "error")]
 
     def cell(value):
         if isinstance(value, float):
             return f"{value:.3f}" if abs(value) < 100 else f"{value:.0f}"
-        return str(value)
+        return str(value).replace("|", "/")
 
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(cell(row.get(c, "")) for c in columns) + " |" for row in rows]
+    lines = ["| " + " | ".join(seen) + " |", "|" + "---|" * len(seen)]
+    lines += ["| " + " | ".join(cell(row.get(c, "")) for c in seen) + " |" for row in rows]
     return "\n".join(lines)
 
 

@@ -83,7 +83,8 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, 
            "confident_right": _confident_right(metrics),
            "core_thickness": state.checks["core_thickness"],
            "unexplained": state.checks["unexplained"],
-           "masks_warned": "yes" if any(CHECK_HINT in w for w in result.warnings) else "no"}
+           "masks_warned": "yes" if any(CHECK_HINT in w for w in result.warnings) else "no",
+           "points": sum(len(path.points) for path in result.paths)}
     row.update({f"{stage}_s": result.timings.get(stage, 0.0) for stage in _STAGE_COLUMNS})
     row["total_s"] = total
     if details:

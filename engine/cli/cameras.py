@@ -3,6 +3,7 @@
 from pathlib import Path
 
 from ..errors import InputError, OutputError
+from ..geometry.upright import UprightSettings
 from ..io.colmap import write_colmap_model
 from ..io.files import check_writable
 from ..io.image_sequence import open_image_sequence
@@ -12,7 +13,7 @@ __all__ = ["cameras_command"]
 
 
 def cameras_command(images_dir, output_dir, *, overwrite=False, progress=None,
-                    settings=CameraEstimationSettings(), cancel=None):
+                    settings=CameraEstimationSettings(), upright=UprightSettings(), cancel=None):
     """Estimate the cameras of a folder of frames and write them as a COLMAP text model.
 
     What ``python -m engine cameras IMAGES_DIR -o MODEL_DIR`` does.
@@ -28,6 +29,7 @@ def cameras_command(images_dir, output_dir, *, overwrite=False, progress=None,
     progress : callable, optional
         ``progress(fraction, message)``.
     settings : CameraEstimationSettings, optional
+    upright : UprightSettings, optional
     cancel : threading.Event, optional
 
     Returns
@@ -51,7 +53,7 @@ def cameras_command(images_dir, output_dir, *, overwrite=False, progress=None,
     with open_image_sequence(images_dir) as sequence:
         estimate = estimate_cameras(list(sequence.paths), settings=settings,
                                     focal_length_px=sequence.focal_length_px,
-                                    progress=progress, cancel=cancel)
+                                    progress=progress, cancel=cancel, upright=upright)
     try:
         write_colmap_model(output, estimate.cameras, points=estimate.points, overwrite=overwrite)
     except FileExistsError as error:

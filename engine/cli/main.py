@@ -16,7 +16,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import Cancelled, InputError, ReconstructionError
-from .settings import add_settings_arguments, settings_from_arguments
+from .settings import PIPELINE_GROUPS, add_pipeline_arguments, pipeline_from_arguments
 
 __all__ = ["main", "build_parser", "add_reconstruct_arguments", "reconstruct_arguments",
            "run_with_exit_code", "ProgressBar"]
@@ -46,58 +46,80 @@ class ProgressBar:
         self.last = line
 
 
-def _add_agreement_arguments(parser):
-    """``--no-agreement`` and the ``--agreement-*`` settings of the masks' agreement."""
-    from ..stages.mask_agreement import MaskAgreementSettings
+def _add_run_arguments(parser, groups):
+    """The settings flags of ``groups`` (each with its prefix), ``--no-agreement``,
+    ``--reference-frame`` and ``--settings``."""
+    from ..pipeline import PipelineSettings
 
-    parser.add_argument("--no-agreement", action="store_true",
-                        help="use each frame's mask as segmented, not checked against the "
-                             "other views (masks given with --masks always are)")
-    add_settings_arguments(parser, MaskAgreementSettings, prefix="agreement")
+    parser.add_argument("--settings", metavar="RUN_JSON",
+                        help="start from the settings (and the colour and scale) of an earlier "
+                             "run: its result file, or a run file saved in Blender; the flags "
+                             "given here change them")
+    parser.add_argument("--reference-frame", type=int, default=argparse.SUPPRESS,
+                        help="frame the automatic colour is taken from (default "
+                             f"{PipelineSettings().reference_frame})")
+    if "agreement" in groups:
+        parser.add_argument("--no-agreement", action="store_true",
+                            help="use each frame's mask as segmented, not checked against the "
+                                 "other views (masks given with --masks always are)")
+    add_pipeline_arguments(parser, groups)
 
 
-def _agreement_settings(args):
+def _run_settings(args, groups):
+    """The run's :class:`PipelineSettings` and inputs: those of ``--settings`` (or the
+    defaults), with the flags given."""
     from dataclasses import replace
 
-    from ..stages.mask_agreement import MaskAgreementSettings
+    from ..pipeline import RunInputs, read_run
 
-    settings = settings_from_arguments(MaskAgreementSettings, args, prefix="agreement")
-    return replace(settings, rounds=0) if args.no_agreement else settings
+    base, inputs = (None, RunInputs()) if args.settings is None else read_run(args.settings)
+    settings = pipeline_from_arguments(args, base, groups)
+    if getattr(args, "no_agreement", False):
+        settings = replace(settings, agreement=replace(settings.agreement, rounds=0))
+    return settings, inputs
+
+
+_SEGMENT_GROUPS = ("segmentation", "cameras", "agreement", "carving", "upright")
 
 
 def _run_segment(args):
-    from ..stages.carving import CarvingSettings
-    from ..stages.segmentation import ColourRange, SegmentationSettings
+    from ..stages.segmentation import ColourRange
     from .segment import segment_sequence_to_folder
 
-    colour = ColourRange.parse(args.hsv) if args.hsv else None
-    settings = settings_from_arguments(SegmentationSettings, args)
+    settings, inputs = _run_settings(args, _SEGMENT_GROUPS)
+    hsv = args.hsv or (None if args.auto else inputs.hsv)
     colour, widths = segment_sequence_to_folder(
-        args.images, args.output, colour=colour, settings=settings,
-        reference_frame=args.reference_frame, overwrite=args.overwrite, cameras=args.cameras,
-        agreement=_agreement_settings(args), carving=settings_from_arguments(CarvingSettings, args),
+        args.images, args.output, colour=ColourRange.parse(hsv) if hsv else None,
+        settings=settings, overwrite=args.overwrite, cameras=args.cameras,
         progress=None if args.quiet else ProgressBar())
-    several = settings.all_cables and args.hsv is None  # each cable's colour was logged
+    several = settings.segmentation.all_cables and hsv is None  # each cable's colour was logged
     log.info("%d frames, cable %.1f-%.1f px wide%s", len(widths), min(widths), max(widths),
              ", every cable of its own colour" if several else f", --hsv {colour}")
+
+
+_CAMERA_GROUPS = ("cameras", "upright")
 
 
 def _run_cameras(args):
     from .cameras import cameras_command
 
+    settings = pipeline_from_arguments(args, groups=_CAMERA_GROUPS)
     estimate = cameras_command(args.images, args.output, overwrite=args.overwrite,
+                               settings=settings.cameras, upright=settings.upright,
                                progress=None if args.quiet else ProgressBar())
     if estimate.unregistered:
         log.warning("did not register: %s", ", ".join(estimate.unregistered))
     log.info("%d cameras written to %s", len(estimate.cameras), args.output)
 
 
+#: The usage line of a reconstruction's options (the settings flags are too many to list).
+RECONSTRUCT_USAGE = ("[--cameras MODEL_DIR] [--masks MASKS_DIR] [--diameter MM | --length M] "
+                     "[--hsv H1,S1,V1,H2,S2,V2] [--overwrite] [--settings RUN_JSON] [SETTINGS ...]")
+
+
 def add_reconstruct_arguments(parser):
     """The inputs and options of a reconstruction, shared by ``reconstruct`` and the add-on's
     ``blender --command`` entry (read back with :func:`reconstruct_arguments`)."""
-    from ..stages.carving import CarvingSettings
-    from ..stages.segmentation import SegmentationSettings
-
     parser.add_argument("images", help="folder of .jpg/.png frames, or a video")
     parser.add_argument("--cameras", metavar="MODEL_DIR",
                         help="COLMAP model (text or binary) of the frames, used as is "
@@ -113,26 +135,22 @@ def add_reconstruct_arguments(parser):
     parser.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     parser.add_argument("--hsv", metavar="H1,S1,V1,H2,S2,V2",
                         help="cable colour range (default: found on the reference frame)")
-    parser.add_argument("--reference-frame", type=int, default=0,
-                        help="frame the automatic colour is taken from (default 0)")
-    add_settings_arguments(parser, SegmentationSettings)
-    _add_agreement_arguments(parser)
-    add_settings_arguments(parser, CarvingSettings)
+    _add_run_arguments(parser, PIPELINE_GROUPS)
 
 
 def reconstruct_arguments(args):
-    """Keyword arguments of :func:`engine.pipeline.run_reconstruction` from parsed arguments."""
-    from ..pipeline import PipelineSettings
-    from ..stages.carving import CarvingSettings
-    from ..stages.segmentation import ColourRange, SegmentationSettings
+    """Keyword arguments of :func:`engine.pipeline.run_reconstruction` from parsed arguments
+    (a run read with ``--settings`` gives the colour and scale the command line does not)."""
+    from ..stages.segmentation import ColourRange
 
-    settings = PipelineSettings(segmentation=settings_from_arguments(SegmentationSettings, args),
-                                agreement=_agreement_settings(args),
-                                carving=settings_from_arguments(CarvingSettings, args),
-                                reference_frame=args.reference_frame)
+    settings, inputs = _run_settings(args, PIPELINE_GROUPS)
+    hsv = args.hsv or inputs.hsv
+    diameter, length = args.diameter, args.length
+    if diameter is None and length is None:
+        diameter, length = inputs.diameter, inputs.length
     return dict(images=args.images, cameras=args.cameras, masks=args.masks,
-                colour=ColourRange.parse(args.hsv) if args.hsv else None,
-                diameter=args.diameter, length=args.length, settings=settings)
+                colour=ColourRange.parse(hsv) if hsv else None,
+                diameter=diameter, length=length, settings=settings)
 
 
 def _run_reconstruct(args):
@@ -185,11 +203,10 @@ def build_parser():
 
 def _add_segment_command(commands, quiet):
     """``segment IMAGES -o OUT``: the masks, junction maps and a contact sheet."""
-    from ..stages.carving import CarvingSettings
-    from ..stages.segmentation import SegmentationSettings
-
     segment = commands.add_parser(
         "segment", parents=[quiet], help="write cable masks and junction maps of every frame",
+        usage="%(prog)s IMAGES -o OUT [--hsv H1,S1,V1,H2,S2,V2 | --auto] [--cameras MODEL_DIR] "
+              "[--overwrite] [--settings RUN_JSON] [SETTINGS ...]",
         description="Segment the cable in every frame and check each mask against the other "
                     "views (cameras from --cameras, or estimated): OUT/masks/*.png (cable = "
                     "255), OUT/junctions/*.png and OUT/contact_sheet.png for a quick look "
@@ -201,15 +218,11 @@ def _add_segment_command(commands, quiet):
                         help="cable colour range (OpenCV HSV: H 0-179 wrapping, S and V 0-255)")
     colour.add_argument("--auto", action="store_true",
                         help="find the cable colour on the reference frame (the default)")
-    segment.add_argument("--reference-frame", type=int, default=0,
-                         help="frame the automatic colour is taken from (default 0)")
     segment.add_argument("--overwrite", action="store_true", help="replace existing masks")
     segment.add_argument("--cameras", metavar="MODEL_DIR",
                          help="COLMAP model (text or binary) of the frames, to agree the masks "
                               "across views (default: estimate the cameras)")
-    add_settings_arguments(segment, SegmentationSettings)
-    _add_agreement_arguments(segment)
-    add_settings_arguments(segment, CarvingSettings)
+    _add_run_arguments(segment, _SEGMENT_GROUPS)
     segment.set_defaults(run=_run_segment)
 
 
@@ -223,6 +236,7 @@ def _add_cameras_command(commands, quiet):
     cameras.add_argument("images", help="folder of .jpg/.png frames, or a video")
     cameras.add_argument("-o", "--output", required=True, help="model folder")
     cameras.add_argument("--overwrite", action="store_true", help="replace an existing model")
+    add_pipeline_arguments(cameras, _CAMERA_GROUPS, aliases=())
     cameras.set_defaults(run=_run_cameras)
 
 
@@ -230,8 +244,11 @@ def _add_reconstruct_command(commands, quiet):
     """``reconstruct IMAGES``: the result JSON (and an OBJ)."""
     rebuild = commands.add_parser(
         "reconstruct", parents=[quiet], help="reconstruct the cable as one continuous centreline",
+        usage=f"%(prog)s IMAGES [-o RESULT_JSON] [--obj OBJ] {RECONSTRUCT_USAGE}",
         description="Reconstruct the cable(s) in the frames: a result JSON "
-                    "(cable_recon.result/1) with one path per cable, its crossings and cameras.")
+                    "(cable_recon.result/1) with one path per cable, its crossings and cameras; "
+                    "every settings group's fields are flags with the group's name as prefix "
+                    "(segmentation and carving ones also without it).")
     add_reconstruct_arguments(rebuild)
     rebuild.add_argument("-o", "--output", metavar="RESULT_JSON",
                          help="result file (default: <images folder name>.cable.json here)")

@@ -13,10 +13,8 @@ from ..io.image_sequence import open_image_sequence
 from ..io.packed_mask import PackedMask
 from ..pipeline import PipelineSettings, sequence_cameras
 from ..progress import StageProgress, check_cancel
-from ..stages.cameras import CameraEstimationSettings
-from ..stages.carving import CarvingSettings
-from ..stages.mask_agreement import MaskAgreementSettings, agree_masks
-from ..stages.segmentation import (SegmentationSettings, SeveralCables, reference_frames,
+from ..stages.mask_agreement import agree_masks
+from ..stages.segmentation import (SeveralCables, reference_frames,
                                    segment_frame, sequence_colour)
 
 __all__ = ["segment_sequence_to_folder", "contact_sheet"]
@@ -48,11 +46,8 @@ def _overlay(image, mask, junctions, removed=None, filled=None, width=240):
     return cv2.resize(shown, (width, height), interpolation=cv2.INTER_AREA)
 
 
-def segment_sequence_to_folder(images, output, *, colour=None, settings=SegmentationSettings(),
-                               reference_frame=0, overwrite=False, cameras=None,
-                               agreement=MaskAgreementSettings(), carving=CarvingSettings(),
-                               camera_settings=CameraEstimationSettings(), progress=None,
-                               cancel=None):
+def segment_sequence_to_folder(images, output, *, colour=None, settings=PipelineSettings(),
+                               overwrite=False, cameras=None, progress=None, cancel=None):
     """Segment every frame, agree the masks across views, and write ``masks/``,
     ``junctions/`` and ``contact_sheet.png``.
 
@@ -68,19 +63,16 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
     output : str or os.PathLike
         Destination folder (created).
     colour : ColourRange, optional
-        The cable colour; found automatically on ``reference_frame`` if None.
-    settings : SegmentationSettings, optional
-    reference_frame : int, optional
+        The cable colour; found automatically on ``settings.reference_frame`` if None.
+    settings : PipelineSettings, optional
+        The reconstruction's: its segmentation, reference frame, and for the agreement across
+        views (``agreement.rounds=0`` writes the masks as segmented, and needs no cameras) its
+        agreement, carving, camera estimation and upright frame.
     overwrite : bool, optional
         Replace masks already in ``output``.
     cameras : str, os.PathLike or sequence of Camera, optional
         A COLMAP model of the frames for the agreement; estimated as the reconstruction does
         if None (frames that do not register keep their masks as segmented).
-    agreement : MaskAgreementSettings, optional
-        ``rounds=0`` writes the masks as segmented (and needs no cameras).
-    carving : CarvingSettings, optional
-        The carving the agreement votes with (the reconstruction's).
-    camera_settings : CameraEstimationSettings, optional
     progress : callable, optional
         ``progress(fraction, message)``.
     cancel : threading.Event, optional
@@ -105,22 +97,24 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
     masks = output / "masks"
     if not overwrite and masks.is_dir() and any(masks.iterdir()):
         raise InputError(f"{masks} already holds masks (pass --overwrite to replace them)")
-    if agreement.rounds > 0 and isinstance(cameras, (str, Path)) and not Path(cameras).is_dir():
+    agree = settings.agreement.rounds > 0
+    if agree and isinstance(cameras, (str, Path)) and not Path(cameras).is_dir():
         raise InputError(f"--cameras {cameras}: not a folder")  # before segmenting
     check_writable(output, created=True)
     stage = StageProgress(progress)
     with open_image_sequence(images) as sequence:
+        reference_frame = settings.reference_frame
         if not 0 <= reference_frame < len(sequence):
             raise InputError(f"reference frame {reference_frame} does not exist "
                              f"({len(sequence)} frames)")
-        colour, model = _colour_model(sequence, colour, settings, reference_frame)
-        agree = agreement.rounds > 0
+        colour, model = _colour_model(sequence, colour, settings.segmentation, reference_frame)
         # the segmentation's share of the progress bar (estimating cameras takes long)
         share = (0.3 if cameras is None else 0.6) if agree else 1.0
         frame_masks, frame_junctions, widths = [], [], []
         for k, name in enumerate(sequence.names):
             check_cancel(cancel, "segmenting")
-            segmentation = segment_frame(sequence.read(k), colour, settings, model=model)
+            segmentation = segment_frame(sequence.read(k), colour, settings.segmentation,
+                                         model=model)
             frame_masks.append(PackedMask(segmentation.mask))
             frame_junctions.append(PackedMask(segmentation.junctions))
             widths.append(segmentation.width)
@@ -128,11 +122,9 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Segmenta
         empty = [name for name, mask in zip(sequence.names, frame_masks) if not mask.any()]
         segmented = list(frame_masks)
         if agree and not empty:
-            frame_masks, frame_junctions = _agreed(
-                sequence, frame_masks, frame_junctions, cameras,
-                PipelineSettings(segmentation=settings, cameras=camera_settings,
-                                 agreement=agreement, carving=carving),
-                stage.part(share, 0.95), cancel)
+            frame_masks, frame_junctions = _agreed(sequence, frame_masks, frame_junctions,
+                                                   cameras, settings, stage.part(share, 0.95),
+                                                   cancel)
         _write_masks(output, sequence, segmented, frame_masks, frame_junctions)
         stage(1.0, "masks written")
     if empty:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..settings import check_settings, setting
 from .camera import look_at_point
 from .similarity import Similarity
 
@@ -45,21 +46,13 @@ class UprightSettings:
         Seed of the RANSAC sampling (the result is deterministic for a given seed).
     """
 
-    plane_threshold: float = 0.01
-    plane_min_inlier_share: float = 0.4
-    plane_iterations: int = 500
-    seed: int = 0
+    plane_threshold: float = setting(0.01, above=0)
+    plane_min_inlier_share: float = setting(0.4, above=0, high=1)
+    plane_iterations: int = setting(500, low=1)
+    seed: int = setting(0, low=0)
 
     def __post_init__(self):
-        if not (np.isfinite(self.plane_threshold) and self.plane_threshold > 0):
-            raise ValueError(f"plane_threshold must be a positive number, not "
-                             f"{self.plane_threshold!r}")
-        if not 0 < self.plane_min_inlier_share <= 1:
-            raise ValueError(f"plane_min_inlier_share must be in (0, 1], not "
-                             f"{self.plane_min_inlier_share!r}")
-        if int(self.plane_iterations) < 1:
-            raise ValueError(f"plane_iterations must be at least 1, not "
-                             f"{self.plane_iterations!r}")
+        check_settings(self)
 
 
 #: A plane needs at least this many inliers to be believed, whatever the share.

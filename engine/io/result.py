@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..geometry.arrays import read_only
 from ..geometry.camera import Camera
 from .files import write_atomic
 
@@ -49,12 +50,6 @@ def _srgb(colour):
     return colour
 
 
-def _readonly(array):
-    array = np.array(array, dtype=np.float64)
-    array.setflags(write=False)
-    return array
-
-
 @dataclass(frozen=True, eq=False)
 class CablePath:
     """One continuous cable: its centreline in order.
@@ -81,14 +76,14 @@ class CablePath:
         points = _points_array(self.points, "points")
         if len(points) < 2:
             raise ValueError("a cable path needs at least 2 points")
-        object.__setattr__(self, "points", _readonly(points))
+        object.__setattr__(self, "points", read_only(points))
         if self.radii is not None:
             radii = np.asarray(self.radii, dtype=np.float64).reshape(-1)
             if radii.shape != (len(points),):
                 raise ValueError(f"radii must have one value per point ({len(points)})")
             if not np.all(np.isfinite(radii) & (radii > 0)):
                 raise ValueError("radii must be positive finite numbers")
-            object.__setattr__(self, "radii", _readonly(radii))
+            object.__setattr__(self, "radii", read_only(radii))
         object.__setattr__(self, "closed", bool(self.closed))
         if self.colour is not None:
             object.__setattr__(self, "colour", _srgb(self.colour))
@@ -128,7 +123,7 @@ class Crossing:
     confidence: float = 1.0
 
     def __post_init__(self):
-        object.__setattr__(self, "position", _readonly(np.asarray(self.position).reshape(3)))
+        object.__setattr__(self, "position", read_only(np.asarray(self.position).reshape(3)))
         if not 0.0 <= float(self.confidence) <= 1.0:
             raise ValueError("crossing confidence must lie in [0, 1]")
         object.__setattr__(self, "confidence", float(self.confidence))
@@ -158,6 +153,11 @@ class Result:
     colour : tuple of float or None
         The cable's colour as seen in the frames (sRGB, 0 to 1), when known; an optional
         field of the format (``"colour": [r, g, b]``).
+    run : dict or None
+        How the run was made, when known: ``{"settings": {...}, "inputs": {...}}``, every
+        stage's settings (``settings_to_dict`` of a ``PipelineSettings``) and the colour and
+        scale it was given (``hsv``, ``diameter``, ``length``); an optional field of the format
+        (``"run"``), which ``python -m engine reconstruct --settings`` reads back.
     """
 
     radius: float
@@ -168,6 +168,7 @@ class Result:
     warnings: tuple = ()
     timings: dict = field(default_factory=dict)
     colour: tuple = None
+    run: dict = None
 
     def __post_init__(self):
         if not (isinstance(self.radius, (int, float)) and math.isfinite(self.radius)
@@ -220,6 +221,8 @@ class Result:
         }
         if self.colour is not None:
             document["colour"] = list(self.colour)
+        if self.run is not None:
+            document["run"] = self.run
         return document
 
 
@@ -298,10 +301,16 @@ def result_from_dict(data):
             isinstance(v, (int, float)) and not isinstance(v, bool) for v in timings.values()):
         raise ResultFormatError("result.timings must map stage names to seconds")
     colour = _colour_field(data.get("colour"), "result.colour")
+    run = data.get("run")
+    if run is not None and not (isinstance(run, dict)
+                                and all(isinstance(run.get(key, {}), dict)
+                                        for key in ("settings", "inputs"))):
+        raise ResultFormatError("result.run must be an object holding 'settings' and "
+                                "'inputs' objects")
     try:
         return Result(radius=float(radius), paths=tuple(paths), crossings=tuple(crossings),
                       cameras=tuple(cameras), units=units, warnings=tuple(warnings),
-                      timings=dict(timings), colour=colour)
+                      timings=dict(timings), colour=colour, run=run)
     except ValueError as error:  # cross-field checks (crossing indices) live in Result
         raise ResultFormatError(str(error)) from None
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..geometry.arrays import as_points
 from ..geometry.polylines import arc_length
+from ..settings import check_settings, setting
 
 __all__ = ["BezierSettings", "BezierCurve", "fit_bezier", "fit_result_curves",
            "distance_to_polyline"]
@@ -38,9 +39,12 @@ class BezierSettings:
         Samples per cubic piece when the distance is checked.
     """
 
-    tolerance: float = 0.1
-    crossing_gap: float = 2.0
-    samples_per_piece: int = 64
+    tolerance: float = setting(0.1, above=0, unit="r")
+    crossing_gap: float = setting(2.0, low=0, unit="r")
+    samples_per_piece: int = setting(64, low=2)
+
+    def __post_init__(self):
+        check_settings(self)
 
 
 @dataclass(frozen=True, eq=False)

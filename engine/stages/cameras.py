@@ -40,6 +40,7 @@ from ..geometry.similarity import Similarity
 from ..geometry.upright import UprightSettings, make_upright
 from ..io.colmap import natural_key
 from ..progress import StageProgress, check_cancel
+from ..settings import check_settings, setting
 
 __all__ = ["CameraEstimationSettings", "CameraEstimate", "estimate_cameras"]
 
@@ -89,14 +90,10 @@ class CameraEstimationSettings:
         See ``min_registered``.
     upright : bool
         Make the world upright (table plane z = 0, +z up); otherwise keep COLMAP's frame.
-    plane_threshold : float
-        Table plane inlier distance as a share of the scene size (see :mod:`.upright`).
-    plane_min_inlier_share : float
-        Share of the sparse points that must lie on the table plane for it to count.
     seed : int
-        Seed of pycolmap's random sampling and of the plane fit.
+        Seed of pycolmap's random sampling.
     num_threads : int
-        Threads pycolmap may use; -1 uses every core.
+        Threads pycolmap may use; 0 or -1 use every core.
     deterministic : bool
         Match image pairs and map on one thread (features still use ``num_threads``), so a
         given seed gives bit-identical cameras run after run (measured: 69 of 69 runs in 23
@@ -105,44 +102,30 @@ class CameraEstimationSettings:
         the time on 2 cores (matching 1.4 s instead of 1.9 s for 30 views).
     """
 
-    max_features: int = 2048
-    first_octave: int = 0
-    max_image_size: int = 3200
+    max_features: int = setting(2048, low=1)
+    first_octave: int = setting(0, low=-1)
+    max_image_size: int = setting(3200, low=1, unit="px")
     camera_model: str = "SIMPLE_RADIAL"
-    sequential_overlap: int = 5
+    sequential_overlap: int = setting(5, low=1, unit="frames")
     quadratic_overlap: bool = True
-    exhaustive_below: float = 0.9
-    exhaustive_max_frames: int = 150
-    min_registered: int = 3
-    min_registered_share: float = 0.5
+    exhaustive_below: float = setting(0.9, low=0, high=1)
+    exhaustive_max_frames: int = setting(150, low=1, unit="frames")
+    min_registered: int = setting(3, low=1, unit="frames")
+    min_registered_share: float = setting(0.5, low=0, high=1)
     upright: bool = True
-    plane_threshold: float = UprightSettings.plane_threshold
-    plane_min_inlier_share: float = UprightSettings.plane_min_inlier_share
-    seed: int = 0
-    num_threads: int = -1
+    seed: int = setting(0, low=0)
+    num_threads: int = setting(-1, low=-1)
     deterministic: bool = True
 
     def __post_init__(self):
+        check_settings(self)
         if self.camera_model not in CAMERA_MODELS:
             raise ValueError(f"camera_model must be one of {', '.join(CAMERA_MODELS)}, "
                              f"not {self.camera_model!r}")
-        for name in ("max_features", "max_image_size", "sequential_overlap", "min_registered",
-                     "exhaustive_max_frames"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name} must be at least 1, not {getattr(self, name)!r}")
-        for name in ("exhaustive_below", "min_registered_share"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"{name} must be between 0 and 1, not {getattr(self, name)!r}")
-        if self.num_threads == 0 or self.num_threads < -1:
-            raise ValueError(f"num_threads must be -1 (all cores) or at least 1, "
-                             f"not {self.num_threads!r}")
-        self.upright_settings()  # validates the plane settings
 
-    def upright_settings(self):
-        """The :class:`~.upright.UprightSettings` these settings imply."""
-        return UprightSettings(plane_threshold=self.plane_threshold,
-                               plane_min_inlier_share=self.plane_min_inlier_share,
-                               seed=self.seed)
+    def threads(self):
+        """pycolmap's ``num_threads``: -1 (every core) for 0 or -1."""
+        return -1 if self.num_threads <= 0 else int(self.num_threads)
 
     def required_registered(self, frames):
         """How many of ``frames`` frames must register for the estimate to succeed."""
@@ -285,7 +268,7 @@ def _extract(database, folder, names, settings, focal_length_px, token, cancel, 
 
     options = pycolmap.FeatureExtractionOptions()
     options.max_image_size = int(settings.max_image_size)
-    options.num_threads = int(settings.num_threads)
+    options.num_threads = settings.threads()
     options.sift.max_num_features = int(settings.max_features)
     options.sift.first_octave = int(settings.first_octave)
     reader = pycolmap.ImageReaderOptions()
@@ -327,7 +310,7 @@ def _match(database, work, names, pairs, settings, token, cancel, stage, label):
     matching = pycolmap.FeatureMatchingOptions()
     # Multi-threaded matching verifies pairs in whatever order threads take them, which now
     # and then changes a few inlier matches (seeded RANSAC notwithstanding).
-    matching.num_threads = 1 if settings.deterministic else int(settings.num_threads)
+    matching.num_threads = 1 if settings.deterministic else settings.threads()
     verification = pycolmap.TwoViewGeometryOptions()
     verification.ransac.random_seed = int(settings.seed)
     pair_file = work / _PAIRS
@@ -351,7 +334,7 @@ def _map(database, folder, work, total, settings, token, cancel, stage, attempt)
 
     options = pycolmap.IncrementalPipelineOptions()
     # Multi-threaded mapping, too, now and then ends a few ulps apart, which then grow.
-    options.num_threads = 1 if settings.deterministic else int(settings.num_threads)
+    options.num_threads = 1 if settings.deterministic else settings.threads()
     options.random_seed = int(settings.seed)
     options.mapper.random_seed = int(settings.seed)
     options.triangulation.random_seed = int(settings.seed)
@@ -403,7 +386,7 @@ def _to_engine(reconstruction):
 # -- public API ----------------------------------------------------------------------------------
 
 def estimate_cameras(image_paths, *, settings=CameraEstimationSettings(), focal_length_px=None,
-                     progress=None, cancel=None, work_dir=None):
+                     progress=None, cancel=None, work_dir=None, upright=UprightSettings()):
     """Estimate one shared camera and a pose per frame with pycolmap, in an upright frame.
 
     Parameters
@@ -413,6 +396,8 @@ def estimate_cameras(image_paths, *, settings=CameraEstimationSettings(), focal_
         (sequential matching pairs neighbours in this order). File names must be unique; they
         name the cameras.
     settings : CameraEstimationSettings, optional
+    upright : UprightSettings, optional
+        How the table plane is found, when ``settings.upright`` puts the world upright.
     focal_length_px : float, optional
         Prior focal length in pixels (e.g. from EXIF); refined by bundle adjustment. Without
         it COLMAP starts from 1.2 times the longer image side.
@@ -469,8 +454,8 @@ def estimate_cameras(image_paths, *, settings=CameraEstimationSettings(), focal_
         folder, names, staged = _stage_images(paths, work)
         if staged is not None:
             stack.callback(shutil.rmtree, staged, ignore_errors=True)
-        return _estimate(folder, names, work, settings, focal_length_px, progress, cancel,
-                         pycolmap)
+        return _estimate(folder, names, work, settings, upright, focal_length_px, progress,
+                         cancel, pycolmap)
 
 
 def _reconstruct(folder, names, work, settings, focal_length_px, progress, cancel, pycolmap):
@@ -519,7 +504,8 @@ def _reconstruct(folder, names, work, settings, focal_length_px, progress, cance
     return best, matching, timings
 
 
-def _estimate(folder, names, work, settings, focal_length_px, progress, cancel, pycolmap):
+def _estimate(folder, names, work, settings, upright, focal_length_px, progress, cancel,
+              pycolmap):
     """Features, matching and mapping of the frames ``names`` in ``folder``, then the cameras
     checked (enough registered) and made upright: a :class:`CameraEstimate`."""
     best, matching, timings = _reconstruct(folder, names, work, settings, focal_length_px,
@@ -547,7 +533,7 @@ def _estimate(folder, names, work, settings, focal_length_px, progress, cancel, 
     if settings.upright:
         _check(cancel)
         cameras, points, transform, plane_found = make_upright(
-            cameras, points, settings=settings.upright_settings())
+            cameras, points, settings=upright)
     else:
         transform = Similarity(1.0, np.eye(3), np.zeros(3))
         plane_found = False

@@ -45,6 +45,7 @@ from ..errors import ReconstructionError
 from ..geometry.upright import look_at_point
 from ..io.packed_mask import PackedMask, unpacked
 from ..progress import StageProgress, check_cancel
+from ..settings import check_settings, setting
 from . import sparse_voxels
 from .segmentation import cable_width
 
@@ -114,25 +115,20 @@ class CarvingSettings:
         than a cable, or too few views to bound it).
     """
 
-    voxels_per_radius: float = 3.0
-    vote: float = 0.5
-    min_views: int = 3
-    min_view_fraction: float = 0.3
-    min_piece_length: float = 10.0
-    core_agreement: float = 0.95
-    root_cells: int = 64
+    voxels_per_radius: float = setting(3.0, above=0)
+    vote: float = setting(0.5, above=0, high=1)
+    min_views: int = setting(3, low=1, unit="views")
+    min_view_fraction: float = setting(0.3, low=0, high=1)
+    min_piece_length: float = setting(10.0, low=0, unit="r")
+    core_agreement: float = setting(0.95, above=0, high=1)
+    root_cells: int = setting(64, low=2)
     coarse_to_fine: bool = True
-    threads: int = 0
-    cache_mb: float = 256.0
-    memory_mb: float = 2048.0
+    threads: int = setting(0, low=0)
+    cache_mb: float = setting(256.0, low=0, unit="MB")
+    memory_mb: float = setting(2048.0, above=0, unit="MB")
 
     def __post_init__(self):
-        if not (0.0 < self.vote <= 1.0 and 0.0 < self.core_agreement <= 1.0):
-            raise ValueError("vote and core_agreement must lie in (0, 1]")
-        if (self.voxels_per_radius <= 0 or self.min_views < 1 or self.root_cells < 2
-                or self.threads < 0 or not self.memory_mb > 0):
-            raise ValueError("voxels_per_radius and memory_mb must be positive, "
-                             "min_views >= 1, root_cells >= 2, threads >= 0")
+        check_settings(self)
 
 
 @dataclass(frozen=True, eq=False)

@@ -45,6 +45,7 @@ import numpy as np
 
 from ..io.packed_mask import PackedMask, unpacked
 from ..progress import StageProgress, check_cancel
+from ..settings import check_settings, setting
 from .carving import CarvingSettings, carve
 from .segmentation import SegmentationSettings, cable_width, junction_map
 from .skeleton_2d import fill_small_holes, thin
@@ -94,31 +95,27 @@ class MaskAgreementSettings:
         (its camera is probably wrong).
     """
 
-    rounds: int = 2
-    min_change: float = 0.005
-    voxels_per_radius: float = 2.0
-    keep_agreement: float = 0.8
-    keep_distance: float = 0.25
-    remove_distance: float = 1.0
-    keep_view_fraction: float = 0.25
-    fill_agreement: float = 0.8
-    max_gap: float = 3.0
-    fill_evidence: float = 0.35
-    background_evidence: float = 0.1
-    max_removed: float = 0.5
+    rounds: int = setting(2, low=0)
+    min_change: float = setting(0.005, low=0)
+    voxels_per_radius: float = setting(2.0, above=0)
+    keep_agreement: float = setting(0.8, above=0, high=1)
+    keep_distance: float = setting(0.25, low=0, unit="widths")
+    remove_distance: float = setting(1.0, low=0, unit="widths")
+    keep_view_fraction: float = setting(0.25, above=0, high=1)
+    fill_agreement: float = setting(0.8, above=0, high=1)
+    max_gap: float = setting(3.0, low=0, unit="widths")
+    fill_evidence: float = setting(0.35, low=0, high=1)
+    background_evidence: float = setting(0.1, low=0, high=1)
+    max_removed: float = setting(0.5, above=0, high=1)
 
     def __post_init__(self):
-        if self.rounds < 0:
-            raise ValueError("rounds must be 0 or more")
-        for name in ("keep_agreement", "fill_agreement", "keep_view_fraction", "max_removed"):
-            if not 0.0 < getattr(self, name) <= 1.0:
-                raise ValueError(f"{name} must lie in (0, 1]")
-        if not 0.0 <= self.background_evidence <= self.fill_evidence <= 1.0:
-            raise ValueError("0 <= background_evidence <= fill_evidence <= 1 is required")
-        if (self.voxels_per_radius <= 0 or self.keep_distance < 0 or self.max_gap < 0
-                or self.min_change < 0 or self.remove_distance < self.keep_distance):
-            raise ValueError("voxels_per_radius must be positive; keep_distance, max_gap and "
-                             "min_change not negative; remove_distance >= keep_distance")
+        check_settings(self)
+        if self.background_evidence > self.fill_evidence:
+            raise ValueError("MaskAgreementSettings.background_evidence must not exceed "
+                             "fill_evidence")
+        if self.remove_distance < self.keep_distance:
+            raise ValueError("MaskAgreementSettings.remove_distance must be at least "
+                             "keep_distance")
 
 
 @dataclass(frozen=True, eq=False)

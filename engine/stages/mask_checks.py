@@ -41,6 +41,7 @@ import numpy as np
 
 from ..io.overlay import draw_projected
 from ..io.packed_mask import unpacked
+from ..settings import check_settings, setting
 
 __all__ = ["CHECK_HINT", "MaskCheckSettings", "core_thickness", "unexplained_share",
            "mask_warnings"]
@@ -69,18 +70,15 @@ class MaskCheckSettings:
         mask's outline a pixel off, so the band is wider than the cable.
     """
 
-    core_thickness: float = 2.5
-    thin_core: float = 1.0
-    unexplained: float = 0.02
-    band: float = 1.5
+    core_thickness: float = setting(2.5, low=0)
+    thin_core: float = setting(1.0, low=0)
+    unexplained: float = setting(0.02, low=0, high=1)
+    band: float = setting(1.5, low=0, unit="r")
 
     def __post_init__(self):
-        for name in ("core_thickness", "thin_core", "unexplained", "band"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+        check_settings(self)
         if 0 < self.core_thickness <= self.thin_core:
-            raise ValueError("thin_core must be under core_thickness")
+            raise ValueError("MaskCheckSettings.thin_core must be under core_thickness")
 
 
 def core_thickness(core_voxels, voxel_size, radius, length):

@@ -46,6 +46,7 @@ from scipy.spatial import cKDTree
 from ..geometry.camera import Camera
 from ..geometry.polylines import arc_length
 from ..progress import StageProgress
+from ..settings import check_settings, setting
 from .rod import Derivatives, ElasticEnergy, Rod, RodSettings, minimise_energy
 from .segmentation import cable_width
 
@@ -112,40 +113,28 @@ class RodFitSettings:
         No vertex moves farther than this in one Newton iteration.
     """
 
-    spacing: float = 1.0
-    smoothing: float = 2.0
-    voxel_weight: float = 1.0
-    voxel_reach: float = 3.0
-    voxel_smoothing: float = 3.0
-    image_weight: float = 10.0
-    image_scale: float = 1.0
-    image_reach: float = 4.0
-    junction_margin: float = 1.0
-    junction_weight: float = 0.5
-    refine_voxel_weight: float = 0.01
-    passes: int = 2
-    contact_weight: float = 1000.0
-    contact_gap: float = 0.02
-    contact_span: float = 4.0
-    anchor_weight: float = 0.01
-    max_iterations: int = 100
-    step_tolerance: float = 1e-3
-    max_step: float = 1.0
+    spacing: float = setting(1.0, above=0, unit="r")
+    smoothing: float = setting(2.0, low=0, unit="vertices")
+    voxel_weight: float = setting(1.0, low=0)
+    voxel_reach: float = setting(3.0, above=0, unit="r")
+    voxel_smoothing: float = setting(3.0, low=0, unit="r")
+    image_weight: float = setting(10.0, low=0)
+    image_scale: float = setting(1.0, above=0)
+    image_reach: float = setting(4.0, above=0)
+    junction_margin: float = setting(1.0, low=0)
+    junction_weight: float = setting(0.5, low=0)
+    refine_voxel_weight: float = setting(0.01, low=0)
+    passes: int = setting(2, low=1)
+    contact_weight: float = setting(1000.0, low=0)
+    contact_gap: float = setting(0.02, low=0)
+    contact_span: float = setting(4.0, above=0, unit="r")
+    anchor_weight: float = setting(0.01, low=0)
+    max_iterations: int = setting(100, low=1)
+    step_tolerance: float = setting(1e-3, above=0, unit="r")
+    max_step: float = setting(1.0, above=0, unit="r")
 
     def __post_init__(self):
-        positive = ("spacing", "voxel_reach", "image_scale", "image_reach", "contact_span",
-                    "step_tolerance", "max_step")
-        for name in positive:
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive")
-        non_negative = ("smoothing", "voxel_weight", "image_weight",
-                        "junction_margin", "junction_weight",
-                        "refine_voxel_weight", "contact_weight", "contact_gap", "anchor_weight")
-        for name in non_negative:
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must not be negative")
-        if int(self.passes) < 1 or int(self.max_iterations) < 1:
-            raise ValueError("passes and max_iterations must be at least 1")
+        check_settings(self)
 
 
 # -- inputs -----------------------------------------------------------------------------------

@@ -43,6 +43,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.polylines import arc_length
 from ..progress import StageProgress, check_cancel
+from ..settings import check_settings, setting
 from . import sparse_voxels
 
 __all__ = ["SegmentGraphSettings", "SegmentGraph", "extract_segment_graph",
@@ -108,30 +109,23 @@ class SegmentGraphSettings:
         branch direction at the end.
     """
 
-    speck_volume: float = 2.0
-    junction_min_volume: float = 1.0
-    seed_depth: float = 2.0
-    band_width: float = 0.5
-    junction_growth: float = 4.0
-    junction_merge_gap: float = 1.0
-    spur_length: float = 2.0
-    min_loop_length: float = 6.0
-    slab_radius: float = 3.0
-    smoothing: float = 1.0
-    refine_iterations: int = 3
-    junction_trim: float = 1.0
-    point_spacing: float = 1.0
-    end_length: float = 1.0
+    speck_volume: float = setting(2.0, low=0, unit="r³")
+    junction_min_volume: float = setting(1.0, low=0, unit="r³")
+    seed_depth: float = setting(2.0, above=0, unit="r")
+    band_width: float = setting(0.5, above=0, unit="r")
+    junction_growth: float = setting(4.0, low=0, unit="r")
+    junction_merge_gap: float = setting(1.0, low=0, unit="r")
+    spur_length: float = setting(2.0, low=0, unit="r")
+    min_loop_length: float = setting(6.0, low=0, unit="r")
+    slab_radius: float = setting(3.0, above=0, unit="r")
+    smoothing: float = setting(1.0, low=0, unit="r")
+    refine_iterations: int = setting(3, low=0)
+    junction_trim: float = setting(1.0, low=0, unit="r")
+    point_spacing: float = setting(1.0, above=0, unit="voxels")
+    end_length: float = setting(1.0, above=0)
 
     def __post_init__(self):
-        for name in ("seed_depth", "band_width", "slab_radius", "point_spacing", "end_length"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive")
-        for name in ("speck_volume", "junction_min_volume", "junction_growth",
-                     "junction_merge_gap", "junction_trim", "spur_length", "min_loop_length",
-                     "smoothing", "refine_iterations"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must not be negative")
+        check_settings(self)
 
 
 class SegmentGraph:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from ..settings import check_settings, setting
 from .colour_model import (_HUE_APART, _HUED, ColourModel, _hue_gap, find_cable, find_cables,
                            opened, range_of, reduced, thin_pieces)
 from .colour_range import ColourRange, hsv_image
@@ -143,34 +144,37 @@ class SegmentationSettings:
         ``shadow_chroma`` 0 keeps every pixel.
     """
 
-    speck_area: float = 3.0
+    speck_area: float = setting(3.0, low=0, unit="widths²")
     fill_highlights: bool = True
-    shade_value: float = 0.5
-    shade_saturation: float = 0.95
-    junction_radius: float = 1.5
-    junction_ratio: float = 1.33
-    junction_disc: float = 1.0
-    junction_pair: float = 2.5
-    junction_spur: float = 1.0
-    junction_hole: float = 0.5
-    edge_reach: int = 2
-    edge_contrast: float = 20.0
+    shade_value: float = setting(0.5, low=0, high=1)
+    shade_saturation: float = setting(0.95, low=0, high=1)
+    junction_radius: float = setting(1.5, above=0, unit="widths")
+    junction_ratio: float = setting(1.33, above=0)
+    junction_disc: float = setting(1.0, low=0, unit="widths")
+    junction_pair: float = setting(2.5, low=0, unit="widths")
+    junction_spur: float = setting(1.0, low=0, unit="widths")
+    junction_hole: float = setting(0.5, low=0, unit="widths²")
+    edge_reach: int = setting(2, low=0, unit="px")
+    edge_contrast: float = setting(20.0, low=0, unit="levels")
     model: bool = True
-    model_frames: int = 3
-    model_smoothing: float = 1.0
-    probability: float = 0.5
-    probability_near: float = 0.4
-    near_reach: float = 0.5
-    range_share: float = 3.0
-    blob_elongation: float = 10.0
-    blob_thickness: float = 1.0
-    shade_chroma: float = 0.4
-    shade_reach: float = 0.75
-    seed_shade_reach: float = 0.8
-    seed_shade_chroma: float = 0.03
-    shadow_chroma: float = 0.02
-    shadow_depth: float = 1.5
+    model_frames: int = setting(3, low=1)
+    model_smoothing: float = setting(1.0, low=0, unit="bins")
+    probability: float = setting(0.5, low=0, high=1)
+    probability_near: float = setting(0.4, low=0, high=1)
+    near_reach: float = setting(0.5, low=0, unit="widths")
+    range_share: float = setting(3.0, low=0)
+    blob_elongation: float = setting(10.0, low=0)
+    blob_thickness: float = setting(1.0, low=0, unit="widths")
+    shade_chroma: float = setting(0.4, low=0)
+    shade_reach: float = setting(0.75, low=0, unit="widths")
+    seed_shade_reach: float = setting(0.8, low=0, unit="widths")
+    seed_shade_chroma: float = setting(0.03, low=0)
+    shadow_chroma: float = setting(0.02, low=0)
+    shadow_depth: float = setting(1.5, low=0)
     all_cables: bool = False
+
+    def __post_init__(self):
+        check_settings(self)
 
 
 @dataclass(frozen=True, eq=False)

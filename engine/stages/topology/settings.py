@@ -2,6 +2,8 @@
 
 from dataclasses import dataclass
 
+from ...settings import check_settings, setting
+
 __all__ = ["TopologySettings"]
 
 
@@ -107,55 +109,38 @@ class TopologySettings:
         e^-window of it) into every junction's probability.
     """
 
-    anchor_distance: float = 3.0
-    anchor_margin: float = 1.5
-    max_anchor_distance: float = 7.0
-    height_window: float = 1.5
-    bend_scale: float = 0.5
-    vertical_weight: float = 0.3
-    height_scale: float = 0.4
-    height_cap: float = 3.0
-    image_gain: float = 0.5
-    image_spread: float = 0.1
-    image_prior_views: float = 3.0
-    image_cap: float = 3.0
-    top_down_power: float = 2.0
-    min_pixel_radius: float = 1.5
-    occluder_margin: float = 1.5
-    highlight_search: float = 0.7
-    highlight_clip: float = 0.8
-    edge_scale: float = 10.0
-    edge_floor: float = 1.0
-    path_radius: float = 3.0
-    spur_length: float = 15.0
-    unpaired_cost: float = 4.0
-    gap_length: float = 10.0
-    bigon_length: float = 30.0
-    min_path_length: float = 10.0
-    bridge_distance: float = 2.5
-    separation: float = 2.2
-    lift_width: float = 4.0
-    confident: float = 0.9
-    max_degree: int = 8
-    search_budget: int = 2000
-    search_window: float = 9.0
+    anchor_distance: float = setting(3.0, above=0, unit="r")
+    anchor_margin: float = setting(1.5, low=0, unit="r")
+    max_anchor_distance: float = setting(7.0, above=0, unit="r")
+    height_window: float = setting(1.5, above=0, unit="r")
+    bend_scale: float = setting(0.5, above=0, unit="rad")
+    vertical_weight: float = setting(0.3, low=0)
+    height_scale: float = setting(0.4, above=0, unit="r")
+    height_cap: float = setting(3.0, low=0)
+    image_gain: float = setting(0.5, above=0)
+    image_spread: float = setting(0.1, above=0)
+    image_prior_views: float = setting(3.0, low=0, unit="views")
+    image_cap: float = setting(3.0, low=0)
+    top_down_power: float = setting(2.0, low=0)
+    min_pixel_radius: float = setting(1.5, low=0, unit="px")
+    occluder_margin: float = setting(1.5, low=0, unit="r")
+    highlight_search: float = setting(0.7, above=0)
+    highlight_clip: float = setting(0.8, above=0, high=1)
+    edge_scale: float = setting(10.0, above=0)
+    edge_floor: float = setting(1.0, low=0)
+    path_radius: float = setting(3.0, above=0, unit="px")
+    spur_length: float = setting(15.0, low=0, unit="r")
+    unpaired_cost: float = setting(4.0, low=0)
+    gap_length: float = setting(10.0, low=0, unit="r")
+    bigon_length: float = setting(30.0, low=0, unit="r")
+    min_path_length: float = setting(10.0, low=0, unit="r")
+    bridge_distance: float = setting(2.5, above=0, unit="r")
+    separation: float = setting(2.2, low=0, unit="r")
+    lift_width: float = setting(4.0, above=0, unit="r")
+    confident: float = setting(0.9, low=0, high=1)
+    max_degree: int = setting(8, low=2)
+    search_budget: int = setting(2000, low=1)
+    search_window: float = setting(9.0, low=0)
 
     def __post_init__(self):
-        for name in ("anchor_distance", "max_anchor_distance", "height_window", "bend_scale",
-                     "height_scale", "image_gain", "image_spread", "highlight_search",
-                     "edge_scale", "path_radius", "bridge_distance", "lift_width"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"TopologySettings.{name} must be positive")
-        for name in ("anchor_margin", "vertical_weight", "height_cap", "image_prior_views",
-                     "image_cap", "top_down_power", "min_pixel_radius", "occluder_margin",
-                     "edge_floor", "spur_length", "unpaired_cost", "gap_length", "bigon_length",
-                     "min_path_length", "separation"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"TopologySettings.{name} must not be negative")
-        if not 0.0 < self.highlight_clip <= 1.0:
-            raise ValueError("TopologySettings.highlight_clip must lie in (0, 1]")
-        if not 0.0 <= self.confident <= 1.0:
-            raise ValueError("TopologySettings.confident must lie in [0, 1]")
-        if self.max_degree < 2 or self.search_budget < 1 or not self.search_window >= 0:
-            raise ValueError("TopologySettings.max_degree must be >= 2, search_budget >= 1 "
-                             "and search_window >= 0")
+        check_settings(self)
