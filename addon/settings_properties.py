@@ -1,13 +1,12 @@
 """Blender properties derived from the engine's settings dataclasses (the single source of
 defaults): one PropertyGroup class per dataclass, and the dataclass back from a group."""
 
-
 import bpy
 import numpy as np
 from bpy.props import BoolProperty, FloatProperty, IntProperty
 
-from ..engine.cli.settings import field_help
-from ..engine.settings import bounds, describe_range, kind_of, simple_fields, unit_of
+from ..engine.settings import (bounds, describe_range, field_help, kind_of, simple_fields,
+                               unit_of)
 
 __all__ = ["property_group_for", "settings_from_group"]
 

@@ -34,7 +34,7 @@ from .io.image_sequence import open_image_sequence, read_image
 from .io.packed_mask import PackedMask, unpacked
 from .io.result import CablePath, Crossing, Result, StrandRef
 from .progress import StageProgress, check_cancel
-from .settings import settings_from_dict, settings_to_dict
+from .settings import check_settings, setting, settings_from_dict, settings_to_dict
 from .stages.cameras import CameraEstimationSettings, estimate_cameras
 from .stages.carving import CarvingSettings, carve
 from .stages.mask_agreement import MaskAgreementSettings, agree_masks
@@ -94,7 +94,10 @@ class PipelineSettings:
     fit: RodFitSettings = field(default_factory=RodFitSettings)
     upright: UprightSettings = field(default_factory=UprightSettings)
     checks: MaskCheckSettings = field(default_factory=MaskCheckSettings)
-    reference_frame: int = 0
+    reference_frame: int = setting(0, low=0)
+
+    def __post_init__(self):
+        check_settings(self)
 
 
 @dataclass(frozen=True)

@@ -6,12 +6,14 @@ limits in Blender, so a value is refused where it is typed, with the same bounds
 """
 
 import dataclasses
+import inspect
 import math
+import re
 
 from .errors import InputError
 
 __all__ = ["setting", "bounds", "unit_of", "describe_range", "out_of_range", "simple_fields",
-           "kind_of", "check_settings", "settings_to_dict", "settings_from_dict"]
+           "kind_of", "check_settings", "field_help", "settings_to_dict", "settings_from_dict"]
 
 
 def setting(default, *, low=None, high=None, above=None, unit=""):
@@ -101,6 +103,30 @@ def check_settings(settings):
         problem = out_of_range(field, getattr(settings, field.name))
         if problem:
             raise ValueError(f"{type(settings).__name__}.{field.name} {problem}")
+
+
+def field_help(cls):
+    """Per field, the first sentence of its numpydoc ``Attributes`` entry.
+
+    The docstring is dedented first: Python 3.13 strips a docstring's indentation when it
+    compiles it, 3.11 keeps it.
+    """
+    entries, current = {}, None
+    for line in inspect.cleandoc(cls.__doc__ or "").splitlines():
+        if re.match(r"^\w+(, \w+)* : ", line):
+            current = re.findall(r"\w+", line.split(" : ")[0])
+            for name in current:
+                entries[name] = []
+        elif current and line.startswith("    ") and line.strip():
+            for name in current:
+                entries[name].append(line.strip())
+        elif not line.strip():
+            current = None
+    texts = {}
+    for name, lines in entries.items():
+        text = " ".join(lines).replace("``", "")
+        texts[name] = text.split(". ")[0].rstrip(".") + "."
+    return texts
 
 
 def settings_to_dict(settings):

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from conftest import ROOT, look_at_camera
-from engine.cli.settings import field_help
 from engine.errors import Cancelled, ReconstructionError
 from engine.evaluation.metrics import evaluate
 from engine.io.colmap import read_colmap_model
 from engine.io.ground_truth import read_ground_truth
 from engine.io.image_sequence import read_image
+from engine.settings import field_help
 from engine.stages.carving import CarvingSettings, carve
 from engine.stages.segment_graph import SegmentGraph, extract_segment_graph_from_voxels
 from engine.stages.segmentation import reference_frames, segment_frame, sequence_colour

@@ -19,7 +19,7 @@ def add_bench_command(commands, *, parents=()):
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--seeds", type=int, default=3,
                        help="scenes per family and seed set (looks, pipeline-looks, "
-                            "topology), per family (carve) or of the pipeline (rod)")
+                            "topology, pipeline), per family (carve) or of the pipeline (rod)")
     bench.add_argument("--families", metavar="NAMES",
                        help="comma-separated families: look families (looks, pipeline-looks: "
                             "those only, without the Cycles captures and real photos) or "
@@ -119,6 +119,6 @@ def run_bench(args):
     else:
         from .pipeline import bench_pipeline
 
-        rows = bench_pipeline(views=args.views, sample=args.sample,
+        rows = bench_pipeline(views=args.views, sample=args.sample, seeds=args.seeds,
                               progress=None if args.quiet else ProgressBar())
     print(format_table(rows))

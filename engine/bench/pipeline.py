@@ -13,6 +13,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import ReconstructionError
 from ..io.ground_truth import read_ground_truth
 from ..stages.mask_checks import CHECK_HINT
@@ -112,13 +114,17 @@ def _confident_right(metrics):
     return f"{sum(check.right for check in confident)}/{len(confident)}"
 
 
-def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, progress=None):
+def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, seeds=1,
+                   progress=None):
     """Reconstruct every scene of the suite (see the module notes).
 
     Parameters
     ----------
     views : int, optional
         Views per synthetic scene.
+    seeds : int, optional
+        Scenes per synthetic family: its own seed, then that seed plus 100, 200 ...; with more
+        than one, each family's rows are followed by their mean and worst.
     sample : str or os.PathLike, optional
         The realistic sample (skipped if missing).
     estimated : bool, optional
@@ -135,7 +141,9 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, progress=
     sample = Path(sample)
     if (sample / "ground_truth.json").is_file():
         scenes.append(("sample (Cycles)", None))
-    scenes.extend(pipeline_suite(views))
+    for label, spec in pipeline_suite(views):
+        scenes += [(label if seeds == 1 else f"{label}, seed {spec.seed + 100 * k}",
+                    replace(spec, seed=spec.seed + 100 * k)) for k in range(seeds)]
     rows = []
     with tempfile.TemporaryDirectory(prefix="bench_pipeline_") as work:
         for number, (label, spec) in enumerate(scenes):
@@ -153,7 +161,36 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, progress=
                 rows.append(row)
     if progress is not None:
         progress(1.0, "done")
-    return rows
+    return rows if seeds == 1 else _with_spread(rows)
+
+
+#: What a family's mean and worst rows summarise (the worst is the largest of each).
+_SPREAD = ("accuracy_mean", "accuracy_p95", "radius_error", "total_s", "peak_mb")
+
+
+def _with_spread(rows):
+    """The rows with each family's mean and worst after its scenes, per camera source."""
+    families = {}
+    for row in rows:
+        families.setdefault(row["scene"].split(", seed ")[0], []).append(row)
+    out = []
+    for family, members in families.items():
+        out += members
+        if len(members) <= 2:  # the sample: one capture
+            continue
+        for cameras in dict.fromkeys(row["cameras"] for row in members):
+            done = [row for row in members if row["cameras"] == cameras and "error" not in row]
+            if not done:
+                continue
+            right = [tuple(map(int, row["crossings"].split("/"))) for row in done]
+            for name, pick in (("mean", np.mean), ("worst", np.max)):
+                out.append({"scene": f"{family}: {name} of {len(done)}", "cameras": cameras,
+                            **{key: float(pick([row[key] for row in done])) for key in _SPREAD
+                               if all(key in row for row in done)},
+                            "crossings": f"{sum(r for r, _ in right)}/{sum(t for _, t in right)}",
+                            "one_path": f"{sum(row['one_path'] == 'yes' for row in done)}"
+                                        f"/{len(done)}"})
+    return out
 
 
 _LOOK_COLUMNS = ("looks", "set", "scene", "masks", "accuracy_mean", "accuracy_p95",

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from .. import __version__
 from ..errors import Cancelled, InputError, ReconstructionError
-from .settings import PIPELINE_GROUPS, add_pipeline_arguments, pipeline_from_arguments
+from .settings import (PIPELINE_GROUPS, add_pipeline_arguments, checked_type,
+                       pipeline_from_arguments)
 
 __all__ = ["main", "build_parser", "add_reconstruct_arguments", "reconstruct_arguments",
            "run_with_exit_code", "ProgressBar"]
@@ -49,15 +50,18 @@ class ProgressBar:
 def _add_run_arguments(parser, groups):
     """The settings flags of ``groups`` (each with its prefix), ``--no-agreement``,
     ``--reference-frame`` and ``--settings``."""
+    from dataclasses import fields
+
     from ..pipeline import PipelineSettings
 
+    frame = next(field for field in fields(PipelineSettings) if field.name == "reference_frame")
     parser.add_argument("--settings", metavar="RUN_JSON",
                         help="start from the settings (and the colour and scale) of an earlier "
                              "run: its result file, or a run file saved in Blender; the flags "
                              "given here change them")
-    parser.add_argument("--reference-frame", type=int, default=argparse.SUPPRESS,
-                        help="frame the automatic colour is taken from (default "
-                             f"{PipelineSettings().reference_frame})")
+    parser.add_argument("--reference-frame", type=checked_type(frame, "--reference-frame"),
+                        default=argparse.SUPPRESS,
+                        help=f"frame the automatic colour is taken from (default {frame.default})")
     if "agreement" in groups:
         parser.add_argument("--no-agreement", action="store_true",
                             help="use each frame's mask as segmented, not checked against the "

@@ -8,13 +8,12 @@ out keep the defaults, or the values of a run read with ``--settings``.
 
 import argparse
 import dataclasses
-import inspect
-import re
 
 from ..errors import InputError
-from ..settings import describe_range, kind_of, out_of_range, simple_fields, unit_of
+from ..settings import (describe_range, field_help, kind_of, out_of_range, simple_fields,
+                        unit_of)
 
-__all__ = ["add_settings_arguments", "settings_from_arguments", "field_help",
+__all__ = ["add_settings_arguments", "settings_from_arguments", "checked_type",
            "add_pipeline_arguments", "pipeline_from_arguments", "PIPELINE_GROUPS"]
 
 #: The settings groups of a reconstruction, as ``PipelineSettings`` names them (each one's
@@ -22,31 +21,7 @@ __all__ = ["add_settings_arguments", "settings_from_arguments", "field_help",
 PIPELINE_GROUPS = ("segmentation", "cameras", "agreement", "carving", "graph", "topology",
                    "fit", "upright", "checks")
 
-def field_help(cls):
-    """Per field, the first sentence of its numpydoc ``Attributes`` entry.
-
-    The docstring is dedented first: Python 3.13 strips a docstring's indentation when it
-    compiles it, 3.11 keeps it.
-    """
-    entries, current = {}, None
-    for line in inspect.cleandoc(cls.__doc__ or "").splitlines():
-        if re.match(r"^\w+(, \w+)* : ", line):
-            current = re.findall(r"\w+", line.split(" : ")[0])
-            for name in current:
-                entries[name] = []
-        elif current and line.startswith("    ") and line.strip():
-            for name in current:
-                entries[name].append(line.strip())
-        elif not line.strip():
-            current = None
-    texts = {}
-    for name, lines in entries.items():
-        text = " ".join(lines).replace("``", "")
-        texts[name] = text.split(". ")[0].rstrip(".") + "."
-    return texts
-
-
-def _checked(field, flag):
+def checked_type(field, flag):
     """An argparse ``type``: the field's kind, refused out of its range."""
     kind = kind_of(field)
 
@@ -102,7 +77,7 @@ def add_settings_arguments(parser, cls, *, prefix="", aliases=False, skip=()):
             continue
         flags = ["--" + name.replace("_", "-") for name in names]
         limits = ", ".join(part for part in (describe_range(field), unit_of(field)) if part)
-        group.add_argument(*flags, dest=dest, type=_checked(field, flags[0]),
+        group.add_argument(*flags, dest=dest, type=checked_type(field, flags[0]),
                            default=argparse.SUPPRESS, metavar=field.name.upper(),
                            help=f"{text} (default {field.default}"
                                 + (f"; {limits})" if limits else ")"))

@@ -1,0 +1,41 @@
+"""The benches' spread rows: each family's mean and worst beside its scenes, failed runs left
+out of them and shown with their error."""
+
+import pytest
+
+from engine.bench.carve import _spread
+from engine.bench.common import format_table
+from engine.bench.pipeline import _with_spread
+
+
+def pipeline_row(scene, cameras, accuracy, crossings, one_path="yes", **extra):
+    return {"scene": scene, "cameras": cameras, "accuracy_mean": accuracy,
+            "accuracy_p95": 2 * accuracy, "radius_error": 0.01, "total_s": 5.0,
+            "peak_mb": 300.0, "crossings": crossings, "one_path": one_path, **extra}
+
+
+def test_a_pipeline_familys_mean_and_worst_follow_its_scenes():
+    rows = [pipeline_row("sample (Cycles)", "true", 0.1, "3/3"),
+            pipeline_row("table 3, seed 1", "true", 0.1, "3/3"),
+            pipeline_row("table 3, seed 101", "true", 0.3, "2/3", one_path="no"),
+            {"scene": "table 3, seed 201", "cameras": "true", "error": "no path"}]
+    out = _with_spread(rows)
+    assert [row["scene"] for row in out] == [
+        "sample (Cycles)", "table 3, seed 1", "table 3, seed 101", "table 3, seed 201",
+        "table 3: mean of 2", "table 3: worst of 2"]
+    mean, worst = out[-2:]
+    assert mean["accuracy_mean"] == pytest.approx(0.2) and worst["accuracy_mean"] == 0.3
+    assert mean["crossings"] == "5/6" and mean["one_path"] == "1/2"
+    assert "no path" in format_table(out)
+
+
+def test_a_carving_familys_spread_is_per_grid():
+    rows = [{"scene": f"knot seed {seed}", "grid_from": grid, "carve_s": 1.0 + seed,
+             "graph_s": 0.1, "chain_mean_r": 0.1 * seed, "chain_p95_r": 0.2 * seed,
+             "crossings": 3, "crossings_found": 3 - (seed == 2)}
+            for seed in (1, 2) for grid in ("ours", "oracle")]
+    out = _spread("knot", rows)
+    assert [(row["scene"], row["grid_from"]) for row in out] == [
+        ("knot: mean of 2", "ours"), ("knot: worst of 2", "ours"),
+        ("knot: mean of 2", "oracle"), ("knot: worst of 2", "oracle")]
+    assert out[1]["chain_mean_r"] == pytest.approx(0.2) and out[0]["crossings_found"] == "5/6"
