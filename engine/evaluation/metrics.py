@@ -31,6 +31,7 @@ from scipy.spatial import cKDTree
 from ..geometry.similarity import align_cameras
 from ..io.ground_truth import GroundTruth
 from ..io.result import CablePath, Crossing, Result
+from ..settings import check_settings, setting
 
 __all__ = ["MetricSettings", "CrossingCheck", "Metrics", "align_result_to_truth", "evaluate"]
 
@@ -68,26 +69,18 @@ class MetricSettings:
         and its ``over`` sample must lie within this distance of the true strand it names.
     """
 
-    sample_spacing: float = 0.1
-    truth_spacing: float = 0.02
-    coverage: float = 1.0
-    jump: float = 2.0
-    ambiguity: float = 2.5
-    crossing_arc: float = 1.5
-    crossing_reach: float = 2.0
-    crossing_height: float = 1.0
-    listed_reach: float = 3.0
+    sample_spacing: float = setting(0.1, above=0, unit="r")
+    truth_spacing: float = setting(0.02, above=0, unit="r")
+    coverage: float = setting(1.0, above=0, unit="r")
+    jump: float = setting(2.0, above=0, unit="r")
+    ambiguity: float = setting(2.5, low=0, unit="r")
+    crossing_arc: float = setting(1.5, above=0, unit="r")
+    crossing_reach: float = setting(2.0, above=0, unit="r")
+    crossing_height: float = setting(1.0, low=0, unit="r")
+    listed_reach: float = setting(3.0, above=0, unit="r")
 
     def __post_init__(self):
-        for name in ("sample_spacing", "truth_spacing", "coverage", "jump", "crossing_arc",
-                     "crossing_reach", "listed_reach"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"MetricSettings.{name} must be a positive number, not {value!r}")
-        for name in ("ambiguity", "crossing_height"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"MetricSettings.{name} must be a number >= 0, not {value!r}")
+        check_settings(self)
 
 
 def align_result_to_truth(result, truth):
