@@ -511,8 +511,8 @@ class Reconstruction:
     path_colours : tuple
         Each path's colour (:func:`path_colours`) when there are several, else empty.
     checks : dict
-        The masks' checks (:mod:`.mask_checks`): ``"core_thickness"`` and ``"unexplained"``
-        (the mean share of mask pixels away from the curve).
+        The masks' checks (:mod:`engine.stages.mask_checks`): ``"core_thickness"`` and
+        ``"unexplained"`` (the mean share of mask pixels away from the curve).
     """
 
     result: Result

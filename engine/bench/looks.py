@@ -1,15 +1,15 @@
 """``python -m engine bench looks``: the masks on every look family, tuning and held-out.
 
 Each scene is segmented as a user's run would be: the cable found automatically on a few
-frames (:func:`.segmentation.sequence_colour`), its colour model learnt there, every frame
-segmented with it. Beside each row, the *naive* mask: a plain threshold (saturation above 60
+frames (:func:`engine.stages.segmentation.sequence_colour`), its colour model learnt there, every
+frame segmented with it. Beside each row, the *naive* mask: a plain threshold (saturation above 60
 and value above 40 in OpenCV's HSV; a colourless cable: value below or above Otsu's split,
 whichever side is smaller). Rows: each look family on its tuning seeds and on its held-out
-seeds (:data:`.synthetic_looks.TUNING_SEEDS`, :data:`.synthetic_looks.HELD_OUT_SEEDS`; code is
-tuned on the first only), the pre-rendered Cycles captures in ``samples/looks`` (held out) and
-real photos with labels (``../shared/real/mbest-s1``, when present; they were looked at while
+seeds (:data:`engine.synthetic.looks.TUNING_SEEDS`, :data:`engine.synthetic.looks.HELD_OUT_SEEDS`;
+code is tuned on the first only), the pre-rendered Cycles captures in ``samples/looks`` (held out)
+and real photos with labels (``../shared/real/mbest-s1``, when present; they were looked at while
 tuning, so they are not held out). Frames are segmented on one core. A family of several
-cables (:data:`.synthetic_looks.SEVERAL_CABLES`) is segmented as a user asking for all of them
+cables (:data:`engine.synthetic.looks.SEVERAL_CABLES`) is segmented as a user asking for all of them
 would (``all_cables``), and scored against the masks of every cable.
 
 The *oracle seed* column is fed the truth and labelled so: every frame segmented with the
@@ -62,8 +62,8 @@ def score_sequence(images, truths, settings=SegmentationSettings(), *, oracle=Fa
     settings : SegmentationSettings, optional
     oracle : bool, optional
         Also segment with the colour model learnt from the true masks of the same frames
-        (:func:`.segmentation.colour_from_masks`): the *oracle seed*, what the model and the
-        rules after it make of a perfect seed. Not with ``settings.all_cables``.
+        (:func:`engine.stages.segmentation.colour_from_masks`): the *oracle seed*, what the model
+        and the rules after it make of a perfect seed. Not with ``settings.all_cables``.
 
     Returns
     -------

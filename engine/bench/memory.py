@@ -2,7 +2,7 @@
 
 Rows: a thin wire (about 6 pixels wide) in 3000x2000 frames, few views (3, 5 and 8: the hull
 is loose), and 200 views of 4K. Each capture is rendered to disk view by view
-(:func:`.synthetic_scene.render_scene_to`), then reconstructed in a fresh process as
+(:func:`engine.synthetic.scene.render_scene_to`), then reconstructed in a fresh process as
 ``python -m engine reconstruct IMAGES --cameras sparse`` does it (automatic colour, masks
 agreed across views, radius estimated; the true cameras, since pycolmap on 200 4K frames
 would take the row's hour), with at most 8 GB of address space. A row says whether it

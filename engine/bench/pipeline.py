@@ -97,7 +97,7 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, 
 
 def _settings_for(family):
     """The settings a user would run a look family with: all cables where there are several
-    (:data:`.synthetic_looks.SEVERAL_CABLES`), else the defaults (None)."""
+    (:data:`engine.synthetic.looks.SEVERAL_CABLES`), else the defaults (None)."""
     from ..pipeline import PipelineSettings
     from ..synthetic.looks import SEVERAL_CABLES
 
@@ -200,7 +200,7 @@ _LOOK_COLUMNS = ("looks", "set", "scene", "masks", "accuracy_mean", "accuracy_p9
 
 
 def _write_naive_masks(images, out):
-    """The naive threshold's masks (:func:`.look_benchmark.naive_mask`) of a folder of
+    """The naive threshold's masks (:func:`engine.bench.looks.naive_mask`) of a folder of
     frames, written into ``out``."""
     import cv2
 
@@ -229,7 +229,7 @@ def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks
     captures : path, optional
         Pre-rendered Cycles captures (held out); None: none.
     families : sequence of str, optional
-        Look families (all of :data:`.synthetic_looks.LOOK_FAMILIES` if None).
+        Look families (all of :data:`engine.synthetic.looks.LOOK_FAMILIES` if None).
     progress : callable, optional
 
     Returns

@@ -3,17 +3,17 @@
 Two families of scenes (30 views at 960x720, the default look, true cameras):
 
 * **easy**: a cable on a table with 3 to 8 crossings (by the seed) far apart, as the other
-  benches' scenes (:func:`.synthetic_layouts.table_layout`, every view framing the cable);
+  benches' scenes (:func:`engine.synthetic.layouts.table_layout`, every view framing the cable);
 * **hard**: a heap of 12 to 20 crossings, some 3 r apart, shallow ones down to 15°, tight
-  loops, strands side by side (:func:`.synthetic_layouts.hard_layout`), seen by views that
-  each frame only part of it (:data:`.synthetic_scene.HARD_FRAMING`).
+  loops, strands side by side (:func:`engine.synthetic.layouts.hard_layout`), seen by views that
+  each frame only part of it (:data:`engine.synthetic.scene.HARD_FRAMING`).
 
 The Cycles captures of hard layouts in ``samples/hard`` (``make sample-hard``: realistic
 renders of held-out seeds, 30 views at 960x720, the cable out of many frames) are a third,
 held-out family, *Cycles hard*.
 
-Each family runs on tuning seeds and on held-out seeds (:data:`.synthetic_looks.TUNING_SEEDS`,
-:data:`.synthetic_looks.HELD_OUT_SEEDS`; tune on the first only), each scene reconstructed in
+Each family runs on tuning seeds and on held-out seeds (:data:`engine.synthetic.looks.TUNING_SEEDS`,
+:data:`engine.synthetic.looks.HELD_OUT_SEEDS`; tune on the first only), each scene reconstructed in
 a fresh process twice: with the **exact** masks (labelled *oracle*: they are the truth) and
 with **ours**, segmented as a user's run does. A row sums up a family, seed set and masks:
 scenes with one path per cable and every crossing right, crossings right over all scenes,

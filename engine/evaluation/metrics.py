@@ -233,7 +233,7 @@ class _Polylines:
 
 class _TrueLine(_Polylines):
     """The true cables with arc-window projections for strand following; arc positions are
-    those of :attr:`.ground_truth.GroundTruth.arc_length` (cables far apart)."""
+    those of :attr:`engine.io.ground_truth.GroundTruth.arc_length` (cables far apart)."""
 
     def __init__(self, truth, spacing):
         super().__init__(truth.lines, spacing)

@@ -1,7 +1,7 @@
 """COLMAP models in and out, through pycolmap (text or binary, as COLMAP writes them).
 
-A model holds the registered cameras (:class:`~.camera.Camera`, one per image) and the sparse
-3D points; the world frame is the model's own.
+A model holds the registered cameras (:class:`~engine.geometry.camera.Camera`, one per image) and
+the sparse 3D points; the world frame is the model's own.
 """
 
 import os

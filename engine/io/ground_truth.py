@@ -167,7 +167,7 @@ class GroundTruth:
         return replace(self, cameras=tuple(cameras))
 
     def strand_ref(self, index):
-        """Sample ``index`` as a :class:`.result.StrandRef` (one path per cable)."""
+        """Sample ``index`` as a :class:`engine.io.result.StrandRef` (one path per cable)."""
         cable = self.cable_of(index)
         return StrandRef(cable, index - self.cables[cable].start)
 

@@ -8,7 +8,8 @@ The pipeline, all in pycolmap:
    ``sequential_overlap`` frames and, with ``quadratic_overlap``, frames 1, 2, 4, 8, ... ahead;
 3. incremental mapping (largest model kept); if too few frames register, exhaustive matching
    adds the missing pairs and mapping runs again;
-4. the world is made upright (:mod:`.upright`): the table is z = 0, +z up, scale unchanged.
+4. the world is made upright (:mod:`engine.geometry.upright`): the table is z = 0, +z up,
+   scale unchanged.
 
 The pairs for step 2 are generated here and matched with ``pycolmap.match_image_pairs``, because
 ``pycolmap.match_sequential`` orders frames by name, which is not video order for names like
@@ -72,7 +73,7 @@ class CameraEstimationSettings:
     camera_model : str
         COLMAP model of the one shared camera: ``"SIMPLE_RADIAL"`` (f, cx, cy, k; robust with
         few views of a flat scene) or ``"OPENCV"`` (fx, fy, cx, cy, k1, k2, p1, p2; for strong
-        lens distortion), or any other key of :data:`~.camera.CAMERA_MODELS`.
+        lens distortion), or any other key of :data:`~engine.geometry.camera.CAMERA_MODELS`.
     sequential_overlap : int
         Each frame is matched with this many following frames (COLMAP's default is 10).
     quadratic_overlap : bool
@@ -134,7 +135,8 @@ class CameraEstimationSettings:
 
 @dataclass(frozen=True, eq=False)
 class CameraEstimate:
-    """Cameras estimated from photos, in an upright world frame (see :mod:`.upright`).
+    """Cameras estimated from photos, in an upright world frame (see
+    :mod:`engine.geometry.upright`).
 
     Attributes
     ----------

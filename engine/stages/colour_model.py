@@ -11,7 +11,7 @@ Here a box (set by hand, picked, or found automatically) only *seeds* the cable:
    few percent of the frame), how long those pieces are, and how much it stands out from what
    lies around it, chromaticity counting double (a shadow has its surface's chromaticity, only
    darker; a coloured cable does not). The best candidate's pixels, with the shade side beside
-   them (:func:`.segmentation.colour_seed`), give the HSV box.
+   them (:func:`engine.stages.segmentation.colour_seed`), give the HSV box.
 2. :class:`ColourModel`: the box's thin pieces on a few frames are the cable's samples, the
    pixels well away from them the background's; their colour histograms (RGB, smoothed) give
    each colour's probability of being cable, looked up per pixel (a histogram back-projection,
@@ -354,7 +354,7 @@ def find_cables(images_rgb):
     of another hue (:func:`_other_part`).
 
     Two cables that cross are often one candidate (one thin object of two colours), which
-    :func:`.segmentation.sequence_colour` splits by hue.
+    :func:`engine.stages.segmentation.sequence_colour` splits by hue.
 
     Returns
     -------

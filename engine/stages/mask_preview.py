@@ -46,7 +46,7 @@ def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side
     image_rgb : ndarray, shape (H, W, 3), uint8
     colour : ColourRange or None
         None: found automatically on this frame, as the reconstruction would
-        (:func:`.segmentation.sequence_colour`).
+        (:func:`engine.stages.segmentation.sequence_colour`).
     settings : SegmentationSettings, optional
     max_side : int, optional
         A larger frame is shrunk so that its larger side is at most this before it is

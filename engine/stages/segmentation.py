@@ -1,11 +1,11 @@
 """Cable masks and junction maps from images (paper §3.1, and beyond it).
 
 The paper thresholds an HSV range set on one frame. Here the range (set by hand, picked, or
-found automatically: :func:`.colour_model.find_cable` picks the most cable-like group of colour
-clusters, not the most saturated colour) only seeds a colour model of the cable against the
-background learnt on a few frames of the sequence (:func:`sequence_colour`,
-:class:`.colour_model.ColourModel`). Each frame's pixels are classified by that model: sure
-pixels, and likely ones right beside them (a shade side, a strand darkened under another).
+found automatically: :func:`engine.stages.colour_model.find_cable` picks the most cable-like group
+of colour clusters, not the most saturated colour) only seeds a colour model of the cable against
+the background learnt on a few frames of the sequence (:func:`sequence_colour`,
+:class:`engine.stages.colour_model.ColourModel`). Each frame's pixels are classified by that model:
+sure pixels, and likely ones right beside them (a shade side, a strand darkened under another).
 Specks and pieces shaped like objects rather than cable are removed, the desaturated specular
 streak along a glossy cable is filled back in, the outline is refined along its normal
 (:func:`refine_edges`), and the cable's width in pixels is measured per frame.

@@ -7,7 +7,7 @@ each view by its homography, so structure-from-motion sees the same surface from
 Clutter objects (boxes and cylinders standing on the table) are ray-cast exactly too and hide
 what lies behind them, the cable included (its mask leaves those pixels out).
 
-What the scene looks like comes from a :class:`~.synthetic_looks.Look`: the cable's colours
+What the scene looks like comes from a :class:`~engine.synthetic.looks.Look`: the cable's colours
 (plain, two-tone or striped) and gloss, the table's texture, the light (soft: blurred shadows;
 hard: sharp shadows of the cable, lifted or not, and of the clutter, a tint and an uneven
 brightness) and the camera's effects (exposure, vignetting, blur, noise, JPEG compression).
@@ -51,8 +51,8 @@ def table_texture(look_or_seed=DEFAULT_LOOK, size=2048):
     Parameters
     ----------
     look_or_seed : Look or int
-        A look (see :func:`.synthetic_textures.table_texture`), or a seed of
-        :func:`.synthetic_textures.legacy_wood_texture` (the original bench's table).
+        A look (see :func:`engine.synthetic.textures.table_texture`), or a seed of
+        :func:`engine.synthetic.textures.legacy_wood_texture` (the original bench's table).
     size : int, optional
         Pixels per side.
 
@@ -885,7 +885,7 @@ def render_views(truth, cameras, look=DEFAULT_LOOK, *, texture=None, texture_siz
         PINHOLE or SIMPLE_PINHOLE.
     look : Look, optional
         The cable's colours, the table, the light, the clutter and the camera's effects
-        (the cable's lift is the layout's: see :func:`.synthetic_scene.make_scene`).
+        (the cable's lift is the layout's: see :func:`engine.synthetic.scene.make_scene`).
     texture : ndarray, optional
         Table texture (RGB uint8, square); :func:`table_texture` of ``look`` if None.
     texture_size : int, optional

@@ -8,7 +8,7 @@ A written scene is a folder a user's capture would look like, plus what is reall
     ground_truth.json       cable_recon.ground_truth/1
     look.json               the look's fields (engine.synthetic.looks.Look)
 
-A scene is drawn in a *look* (:mod:`.synthetic_looks`): :func:`look_scene` builds "family X,
+A scene is drawn in a *look* (:mod:`engine.synthetic.looks`): :func:`look_scene` builds "family X,
 seed N" in one call.
 """
 
@@ -45,7 +45,7 @@ class SceneSpec:
     kind : str
         ``"table"``, ``"loop"`` (a closed cable on the table), ``"knot"``, ``"hanging"``,
         ``"pair"`` (two cables crossing each other) or ``"hard"`` (a heap: 12 to 20
-        crossings close together, :func:`.synthetic_layouts.hard_layout`).
+        crossings close together, :func:`engine.synthetic.layouts.hard_layout`).
     crossings : int
         For ``"table"``, ``"loop"`` and ``"pair"``.
     seed : int
@@ -57,17 +57,17 @@ class SceneSpec:
     rig : str
         ``"orbit"`` or ``"handheld"``.
     framing : float
-        The share of the cable's extent a view frames (:func:`.synthetic_cameras.orbit_cameras`):
-        1 shows the whole cable in every view; under 1 the cameras come closer and aim around
-        it, so each part of the cable is out of some frames
-        (:func:`.synthetic_cameras.out_of_frame`).
+        The share of the cable's extent a view frames
+        (:func:`engine.synthetic.cameras.orbit_cameras`): 1 shows the whole cable in every view;
+        under 1 the cameras come closer and aim around it, so each part of the cable is out of some
+        frames (:func:`engine.synthetic.cameras.out_of_frame`).
     width, height : int
         Image size.
     image_format : str or None
         ``"png"`` or ``"jpg"``; None: ``"jpg"`` when the look compresses its frames
         (``look.jpeg_quality < 100``), else ``"png"``.
     look : Look
-        What the scene looks like (:mod:`.synthetic_looks`); its ``lift`` raises the layout.
+        What the scene looks like (:mod:`engine.synthetic.looks`); its ``lift`` raises the layout.
     """
 
     kind: str = "table"
@@ -189,12 +189,13 @@ def _framed_truth(spec):
 
 #: How much of a hard scene each view frames (:attr:`SceneSpec.framing`): a centreline point
 #: of a hard layout is out of 15–45% of 30 orbit views on average and out of fewer than 80% at
-#: most (:func:`.synthetic_cameras.out_of_frame`; ``test_views_that_frame_part_of_the_cable``).
+#: most (:func:`engine.synthetic.cameras.out_of_frame`;
+#: ``test_views_that_frame_part_of_the_cable``).
 HARD_FRAMING = 0.6
 
 
 def hard_spec(seed, *, views=30, width=960, height=720, framing=HARD_FRAMING, **fields):
-    """The hard scene of ``seed``: a heap (:func:`.synthetic_layouts.hard_layout`) in the
+    """The hard scene of ``seed``: a heap (:func:`engine.synthetic.layouts.hard_layout`) in the
     default look, seen by views that each frame part of it (``framing``).
 
     Returns
@@ -212,12 +213,12 @@ def look_spec(family, seed, *, kind=None, crossings=3, views=24, width=640, heig
     Parameters
     ----------
     family : str
-        One of :data:`.synthetic_looks.LOOK_FAMILIES`, or ``"default"`` (the original look).
+        One of :data:`engine.synthetic.looks.LOOK_FAMILIES`, or ``"default"`` (the original look).
     seed : int
-        Seeds the look (:func:`.synthetic_looks.sample_look`) and the layout.
+        Seeds the look (:func:`engine.synthetic.looks.sample_look`) and the layout.
     kind, crossings, views, width, height
         As :class:`SceneSpec`; ``kind`` None: ``"pair"`` for a family of several cables
-        (:data:`.synthetic_looks.SEVERAL_CABLES`), else ``"table"``.
+        (:data:`engine.synthetic.looks.SEVERAL_CABLES`), else ``"table"``.
     **fields
         Further :class:`SceneSpec` fields (``radius``, ``rig``, ``image_format``, ...).
 

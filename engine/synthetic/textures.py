@@ -1,5 +1,5 @@
 """Table textures of synthetic looks: wood, voronoi cells, woven fabric, printed paper, tiles and a
-plain surface, coloured and seeded by a :class:`~.synthetic_looks.Look`.
+plain surface, coloured and seeded by a :class:`~engine.synthetic.looks.Look`.
 
 Every kind but ``plain`` carries corners and blobs at several scales, none of them periodic over
 the table, so structure-from-motion (SIFT) matches the table between views. The same look gives
