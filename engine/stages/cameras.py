@@ -97,10 +97,9 @@ class CameraEstimationSettings:
         Threads pycolmap may use; 0 or -1 use every core.
     deterministic : bool
         Match image pairs and map on one thread (features still use ``num_threads``), so a
-        given seed gives bit-identical cameras run after run (measured: 69 of 69 runs in 23
-        processes). With threads, about 1 run in 7 differed (a few inlier matches, or the
-        mapping), moving cameras by about 1e-4 of their distance; threads save about 8% of
-        the time on 2 cores (matching 1.4 s instead of 1.9 s for 30 views).
+        given seed gives bit-identical cameras run after run (``tests/test_camera_estimation.py``
+        runs it twice); with threads a run can differ by a few inlier matches, and moves its
+        cameras a little.
     """
 
     max_features: int = setting(2048, low=1)

@@ -65,8 +65,8 @@ _LEVEL_BYTES = 80
 _LEAST_VOXELS_PER_RADIUS = 1.0
 #: Bytes the carved grid costs per occupied voxel (its index, junction flag, views and
 #: agreement: 31), and the segment graph at its peak per voxel of the grid's core (its
-#: neighbour tables, adjacency and distances: 1191-1193 measured with tracemalloc on two
-#: scenes; the rod fit's voxel points cost less).
+#: neighbour tables, adjacency and distances, as tracemalloc counts them; the rod fit's voxel
+#: points cost less). ``python -m engine bench memory`` runs whole captures against the budget.
 _VOXEL_BYTES, _CORE_BYTES = 32, 1200
 
 
