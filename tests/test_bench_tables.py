@@ -4,7 +4,7 @@ out of them and shown with their error."""
 import pytest
 
 from engine.bench.carve import _spread
-from engine.bench.common import format_table
+from engine.bench.common import format_table, mean_and_worst
 from engine.bench.pipeline import _with_spread
 
 
@@ -39,3 +39,28 @@ def test_a_carving_familys_spread_is_per_grid():
         ("knot: mean of 2", "ours"), ("knot: worst of 2", "ours"),
         ("knot: mean of 2", "oracle"), ("knot: worst of 2", "oracle")]
     assert out[1]["chain_mean_r"] == pytest.approx(0.2) and out[0]["crossings_found"] == "5/6"
+
+
+def test_the_worst_of_a_score_is_its_smallest_and_failed_rows_are_left_out():
+    rows = [{"iou_mean": 0.9, "ms_per_frame": 20.0}, {"iou_mean": 0.7, "ms_per_frame": 30.0},
+            {"error": "no cable pixels"}]
+    (mean_name, mean), (worst_name, worst) = mean_and_worst(
+        rows, ("iou_mean", "ms_per_frame", "absent"), higher_is_better=("iou_mean",))
+    assert (mean_name, worst_name) == ("mean", "worst")
+    assert mean == pytest.approx({"iou_mean": 0.8, "ms_per_frame": 25.0})
+    assert worst == {"iou_mean": 0.7, "ms_per_frame": 30.0}
+    assert mean_and_worst([{"error": "x"}], ("iou_mean",)) == []
+
+
+def test_bench_segment_summarises_each_family_over_its_seeds(tmp_path, monkeypatch):
+    from engine.bench import segment
+
+    monkeypatch.setattr(segment, "FAMILIES", (("table 3", dict(crossings=3), 1),))
+    rows = segment.bench_segment(sample=tmp_path, views=4, seeds=2)
+    assert [row["scene"] for row in rows] == [
+        "fast table 3 seed 1", "fast table 3 seed 101", "fast table 3: mean of 2",
+        "fast table 3: worst of 2"]
+    worst = rows[-1]
+    assert worst["iou_mean"] == min(rows[0]["iou_mean"], rows[1]["iou_mean"])
+    assert worst["ms_per_frame"] == max(rows[0]["ms_per_frame"], rows[1]["ms_per_frame"])
+    assert 0.5 < worst["iou_mean"] <= 1.0

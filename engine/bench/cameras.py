@@ -12,6 +12,7 @@ from ..io.ground_truth import read_ground_truth
 from ..io.image_sequence import open_image_sequence
 from ..stages.cameras import CameraEstimationSettings, estimate_cameras
 from ..synthetic.scene import SceneSpec, make_scene, write_scene
+from .common import mean_and_worst
 
 __all__ = ["bench_cameras"]
 
@@ -32,6 +33,12 @@ def _bench_one(scene, paths, true_cameras, settings, centreline):
     return row
 
 
+#: What the synthetic scenes' mean and worst rows summarise (the worst is the largest of each).
+_SPREAD = ("seconds", "reprojection_error_px", "centreline_px", "centreline_max_px",
+           "centre_error_pct", "centre_error_max_pct", "rotation_error_deg",
+           "rotation_error_max_deg", "up_error_deg", "focal_error_pct")
+
+
 def bench_cameras(*, views=30, seeds=(0,), include_sample=True,
                   settings=CameraEstimationSettings()):
     """Benchmark camera estimation on synthetic scenes and the bundled sample.
@@ -41,7 +48,8 @@ def bench_cameras(*, views=30, seeds=(0,), include_sample=True,
     views : int, optional
         Views per synthetic scene (fast renderer, 960x720 PNGs, 3 crossings).
     seeds : sequence of int, optional
-        One synthetic scene per seed.
+        One synthetic scene per seed; with more than one, their mean and worst follow them
+        (the registered views summed).
     include_sample : bool, optional
         Also run on ``samples/sequence`` (Cycles renders) if its ground truth exists.
     settings : CameraEstimationSettings, optional
@@ -63,6 +71,11 @@ def bench_cameras(*, views=30, seeds=(0,), include_sample=True,
                            key=lambda path: natural_key(path.name))
             rows.append(_bench_one(f"synthetic table seed {seed} ({views} views)", paths,
                                    scene.cameras, settings, scene.truth.centreline))
+    if len(seeds) > 1:
+        registered = (f"{sum(row['registered'] for row in rows)}/"
+                      f"{sum(row['total'] for row in rows)}")
+        rows += [{"scene": f"synthetic table: {name} of {len(seeds)}", "registered": registered,
+                  **values} for name, values in mean_and_worst(rows, _SPREAD)]
     sample = Path(__file__).resolve().parents[2] / "samples" / "sequence"
     truth_file = sample / "ground_truth.json"
     if include_sample and truth_file.is_file():

@@ -30,7 +30,7 @@ from ..stages.segmentation import (cable_width, junction_map, reference_frames, 
 from ..synthetic.cameras import orbit_cameras
 from ..synthetic.render import render_masks
 from ..synthetic.scene import SceneSpec, make_scene
-from .common import in_fresh_process
+from .common import in_fresh_process, mean_and_worst
 
 __all__ = ["bench_carve", "graph_scores"]
 
@@ -151,11 +151,9 @@ def _spread(family, rows):
             continue
         found = (f"{sum(row['crossings_found'] for row in done)}/"
                  f"{sum(row['crossings'] for row in done)}")
-        for name, pick in (("mean", np.mean), ("worst", np.max)):
+        for name, values in mean_and_worst(done, _SPREAD):
             summary.append({"scene": f"{family}: {name} of {len(done)}", "grid_from": grid,
-                            **{key: float(pick([row[key] for row in done]))
-                               for key in _SPREAD if all(key in row for row in done)},
-                            "crossings_found": found})
+                            **values, "crossings_found": found})
     return summary
 
 

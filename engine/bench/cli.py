@@ -19,7 +19,8 @@ def add_bench_command(commands, *, parents=()):
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--seeds", type=int, default=3,
                        help="scenes per family and seed set (looks, pipeline-looks, "
-                            "topology, pipeline), per family (carve) or of the pipeline (rod)")
+                            "topology, pipeline), per family (segment, carve) or in all "
+                            "(cameras, rod)")
     bench.add_argument("--families", metavar="NAMES",
                        help="comma-separated families: look families (looks, pipeline-looks: "
                             "those only, without the Cycles captures and real photos) or "
@@ -69,14 +70,15 @@ def run_bench(args):
         from .looks import bench_looks
 
         if args.stage == "segment":
-            print(format_table(bench_segment(sample=args.sample, views=args.views)))
+            print(format_table(bench_segment(sample=args.sample, views=args.views,
+                                             seeds=args.seeds)))
             print()
-        rows = bench_looks(seeds=args.seeds if args.stage == "looks" else 1,
-                           **_family_options(args))
+        rows = bench_looks(seeds=args.seeds, **_family_options(args))
     elif args.stage == "cameras":
         from .cameras import bench_cameras
 
-        rows = bench_cameras(views=args.views, include_sample=True)
+        rows = bench_cameras(views=args.views, seeds=tuple(range(args.seeds)),
+                             include_sample=True)
     elif args.stage == "carve":
         from .carve import bench_carve
 

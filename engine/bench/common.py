@@ -7,7 +7,9 @@ import resource
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-__all__ = ["format_table", "in_fresh_process", "DEFAULT_SAMPLE"]
+import numpy as np
+
+__all__ = ["format_table", "in_fresh_process", "mean_and_worst", "DEFAULT_SAMPLE"]
 
 DEFAULT_SAMPLE = Path("samples") / "sequence"
 
@@ -30,6 +32,33 @@ def format_table(rows, columns=None):
     lines = ["| " + " | ".join(seen) + " |", "|" + "---|" * len(seen)]
     lines += ["| " + " | ".join(cell(row.get(c, "")) for c in seen) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def mean_and_worst(rows, keys, *, higher_is_better=()):
+    """The mean and the worst of ``keys`` over ``rows`` (the rows without an ``error``).
+
+    Parameters
+    ----------
+    rows : list of dict
+    keys : sequence of str
+        The columns summarised; a column some row lacks is left out.
+    higher_is_better : sequence of str, optional
+        Columns whose worst is their smallest value (an IoU); every other column's worst is its
+        largest (an error, a time).
+
+    Returns
+    -------
+    list of (str, dict)
+        ``("mean", values)`` and ``("worst", values)``; empty when no row is free of errors.
+    """
+    done = [row for row in rows if "error" not in row]
+    keys = [key for key in keys if done and all(key in row for row in done)]
+    if not done:
+        return []
+    mean = {key: float(np.mean([row[key] for row in done])) for key in keys}
+    worst = {key: float((np.min if key in higher_is_better else np.max)(
+        [row[key] for row in done])) for key in keys}
+    return [("mean", mean), ("worst", worst)]
 
 
 def _measured(function, args):

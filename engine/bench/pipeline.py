@@ -13,13 +13,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import ReconstructionError
 from ..io.ground_truth import read_ground_truth
 from ..stages.mask_checks import CHECK_HINT
 from ..synthetic.scene import SceneSpec, make_scene, write_scene
-from .common import DEFAULT_SAMPLE, in_fresh_process
+from .common import DEFAULT_SAMPLE, in_fresh_process, mean_and_worst
 
 __all__ = ["bench_pipeline", "pipeline_suite", "bench_pipeline_looks", "scored_run"]
 
@@ -183,10 +181,9 @@ def _with_spread(rows):
             if not done:
                 continue
             right = [tuple(map(int, row["crossings"].split("/"))) for row in done]
-            for name, pick in (("mean", np.mean), ("worst", np.max)):
+            for name, values in mean_and_worst(done, _SPREAD):
                 out.append({"scene": f"{family}: {name} of {len(done)}", "cameras": cameras,
-                            **{key: float(pick([row[key] for row in done])) for key in _SPREAD
-                               if all(key in row for row in done)},
+                            **values,
                             "crossings": f"{sum(r for r, _ in right)}/{sum(t for _, t in right)}",
                             "one_path": f"{sum(row['one_path'] == 'yes' for row in done)}"
                                         f"/{len(done)}"})

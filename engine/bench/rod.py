@@ -149,7 +149,7 @@ def bench_rod(*, counts=(250, 500, 1000, 2000), views=12, width=960, height=720,
 def _pipeline_rows(seeds, views, width, height, settings):
     """One row per seed, as the pipeline fits (in a fresh process), then their mean and worst."""
     from ..pipeline import PipelineSettings
-    from .common import in_fresh_process
+    from .common import in_fresh_process, mean_and_worst
     from .pipeline import scored_run
 
     pipeline = replace(PipelineSettings(), fit=settings)
@@ -170,11 +170,9 @@ def _pipeline_rows(seeds, views, width, height, settings):
                          "accuracy_p95": run["accuracy_p95"], "crossings": run["crossings"]})
     done = [row for row in rows if "error" not in row]
     if len(done) > 1:
-        for name, pick in (("mean", np.mean), ("worst", np.max)):
-            rows.append({"rows": f"ours, {name} of {len(done)}",
-                         **{key: float(pick([row[key] for row in done]))
-                            for key in ("fit_s", "ms_per_vertex", "accuracy_mean",
-                                        "accuracy_p95")}})
+        for name, values in mean_and_worst(done, ("fit_s", "ms_per_vertex", "accuracy_mean",
+                                                  "accuracy_p95")):
+            rows.append({"rows": f"ours, {name} of {len(done)}", **values})
     return rows
 
 
