@@ -122,3 +122,22 @@ def test_bench_families_reach_the_bench(monkeypatch, capsys, stage):
         monkeypatch.setattr(module, name, fake)
     assert main(["-q", "bench", stage, "--families", "two_cables,pale"]) == 0
     assert calls[-1]["families"] == ("two_cables", "pale") and calls[-1]["captures"] is None
+
+
+@pytest.mark.parametrize("stage", ["looks", "pipeline-looks"])
+def test_bench_takes_the_masks_settings_as_reconstruct_does(monkeypatch, stage):
+    import engine.bench.looks
+    import engine.bench.pipeline
+    from engine.cli.main import main
+
+    calls = []
+    for module, name in ((engine.bench.looks, "bench_looks"),
+                         (engine.bench.pipeline, "bench_pipeline_looks")):
+        monkeypatch.setattr(module, name, lambda **kwargs: calls.append(kwargs) or [{}])
+    assert main(["-q", "bench", stage, "--segmentation-side-reach", "0", "--ours-only"]) == 0
+    given = calls[-1]["settings" if stage == "looks" else "segmentation"]
+    assert given.side_reach == 0.0 and given.shadow_chroma == 0.02
+    if stage == "pipeline-looks":
+        assert calls[-1]["masks"] == ("ours",)
+        assert main(["-q", "bench", stage]) == 0  # the defaults: the bench's own per family
+        assert calls[-1]["segmentation"] is None and len(calls[-1]["masks"]) == 3

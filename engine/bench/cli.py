@@ -1,6 +1,7 @@
 """``python -m engine bench STAGE``: the benchmarks' command (developer checkouts only)."""
 
 from ..cli.main import ProgressBar
+from ..cli.settings import add_pipeline_arguments, settings_from_arguments
 from ..errors import InputError
 
 __all__ = ["STAGES", "add_bench_command", "run_bench"]
@@ -27,6 +28,11 @@ def add_bench_command(commands, *, parents=()):
                             "easy, hard (topology: those only, without the Cycles captures)")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")
+    bench.add_argument("--ours-only", action="store_true",
+                       help="pipeline-looks: only the rows of our masks (not the naive "
+                            "threshold's or the exact masks', which no setting changes)")
+    # the masks' settings, as `reconstruct` takes them (segment, looks, pipeline-looks)
+    add_pipeline_arguments(bench, groups=("segmentation",), aliases=())
     bench.set_defaults(run=run_bench)
 
 
@@ -63,17 +69,19 @@ def _topology_families(args):
 
 def run_bench(args):
     """Print the table(s) of ``bench STAGE``."""
+    from ..stages.segmentation import SegmentationSettings
     from .common import format_table
     from .segment import bench_segment
 
+    segmentation = settings_from_arguments(SegmentationSettings, args, prefix="segmentation")
     if args.stage in ("segment", "looks"):
         from .looks import bench_looks
 
         if args.stage == "segment":
             print(format_table(bench_segment(sample=args.sample, views=args.views,
-                                             seeds=args.seeds)))
+                                             seeds=args.seeds, settings=segmentation)))
             print()
-        rows = bench_looks(seeds=args.seeds, **_family_options(args))
+        rows = bench_looks(seeds=args.seeds, settings=segmentation, **_family_options(args))
     elif args.stage == "cameras":
         from .cameras import bench_cameras
 
@@ -114,10 +122,13 @@ def run_bench(args):
         print(format_table(scenes, SCENE_COLUMNS))
         return
     elif args.stage == "pipeline-looks":
-        from .pipeline import bench_pipeline_looks
+        from .pipeline import MASK_ROWS, bench_pipeline_looks
 
-        rows = bench_pipeline_looks(seeds=args.seeds, progress=None if args.quiet
-                                    else ProgressBar(), **_family_options(args))
+        given = segmentation if segmentation != SegmentationSettings() else None
+        rows = bench_pipeline_looks(seeds=args.seeds, segmentation=given,
+                                    masks=MASK_ROWS[:1] if args.ours_only else MASK_ROWS,
+                                    progress=None if args.quiet else ProgressBar(),
+                                    **_family_options(args))
     else:
         from .pipeline import bench_pipeline
 

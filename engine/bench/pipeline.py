@@ -93,16 +93,20 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, 
     return row
 
 
-def _settings_for(family):
+def _settings_for(family, segmentation=None):
     """The settings a user would run a look family with: all cables where there are several
-    (:data:`engine.synthetic.looks.SEVERAL_CABLES`), else the defaults (None)."""
+    (:data:`engine.synthetic.looks.SEVERAL_CABLES`), else the defaults (None); with
+    ``segmentation`` (a :class:`SegmentationSettings`) in place of the default one."""
     from ..pipeline import PipelineSettings
     from ..synthetic.looks import SEVERAL_CABLES
 
-    if family not in SEVERAL_CABLES:
+    if family not in SEVERAL_CABLES and segmentation is None:
         return None
     settings = PipelineSettings()
-    return replace(settings, segmentation=replace(settings.segmentation, all_cables=True))
+    segmentation = segmentation if segmentation is not None else settings.segmentation
+    if family in SEVERAL_CABLES:
+        segmentation = replace(segmentation, all_cables=True)
+    return replace(settings, segmentation=segmentation)
 
 
 def _confident_right(metrics):
@@ -211,8 +215,12 @@ def _write_naive_masks(images, out):
     return out
 
 
+#: The masks each scene of :func:`bench_pipeline_looks` is reconstructed from.
+MASK_ROWS = ("ours", "naive threshold", "oracle: exact")
+
+
 def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks",
-                         families=None, progress=None):
+                         families=None, segmentation=None, masks=MASK_ROWS, progress=None):
     """End to end on every look family (tuning and held-out seeds) and the Cycles captures,
     with the true cameras: our masks (as a user's run makes them), the naive threshold's,
     and the exact masks (the oracle).
@@ -227,6 +235,11 @@ def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks
         Pre-rendered Cycles captures (held out); None: none.
     families : sequence of str, optional
         Look families (all of :data:`engine.synthetic.looks.LOOK_FAMILIES` if None).
+    segmentation : SegmentationSettings, optional
+        Our masks' settings (the defaults if None; all cables for a family of several).
+    masks : sequence of str, optional
+        Which of :data:`MASK_ROWS` to run (our masks only: the other two do not depend on
+        ``segmentation``).
     progress : callable, optional
 
     Returns
@@ -255,14 +268,17 @@ def bench_pipeline_looks(*, seeds=1, views=24, captures=Path("samples") / "looks
                 folder, label = Path(work) / f"{family}-{seed}", f"seed {seed}"
                 write_scene(look_scene(family, seed, views=views, width=960, height=720),
                             folder)
-            naive = _write_naive_masks(folder / "images", Path(work) / f"naive-{number}")
-            for masks_label, masks in (("ours", None), ("naive threshold", naive),
-                                       ("oracle: exact", folder / "masks")):
+            given = {"ours": None, "oracle: exact": folder / "masks"}
+            if "naive threshold" in masks:
+                given["naive threshold"] = _write_naive_masks(folder / "images",
+                                                              Path(work) / f"naive-{number}")
+            for masks_label in (label for label in MASK_ROWS if label in masks):
                 row = {"looks": family, "set": split, "scene": label, "masks": masks_label}
+                mask_folder = given[masks_label]
                 row.update(in_fresh_process(scored_run, str(folder),
                                             str(folder / "ground_truth.json"), True,
-                                            None if masks is None else str(masks),
-                                            _settings_for(family)))
+                                            None if mask_folder is None else str(mask_folder),
+                                            _settings_for(family, segmentation)))
                 rows.append(row)
     if progress is not None:
         progress(1.0, "done")

@@ -1,0 +1,30 @@
+"""Per-pixel colour helpers the mask steps share: chromaticity, brightness and the cable's box."""
+
+import numpy as np
+
+__all__ = ["CHROMA_FLOOR", "brightness", "cable_box", "chroma"]
+
+#: Pixels darker than this (sum of R, G, B) have no reliable chromaticity.
+CHROMA_FLOOR = 60
+
+
+def chroma(rgb):
+    """Chromaticity: colours divided by their sum (the last axis)."""
+    rgb = np.asarray(rgb, dtype=np.float32)
+    return rgb / np.maximum(brightness(rgb), 1.0)[..., None]
+
+
+def brightness(rgb):
+    """The sum of the colours (the last axis; int32 for integer colours): three additions
+    are several times faster than numpy's reduction over an axis of three."""
+    first = rgb[..., 0].astype(np.int32) if rgb.dtype.kind in "ui" else rgb[..., 0]
+    return first + rgb[..., 1] + rgb[..., 2]
+
+
+def cable_box(mask, margin):
+    """Slice of the mask's bounding box grown by ``margin`` pixels (None for an empty mask)."""
+    rows, cols = np.nonzero(mask.any(axis=1))[0], np.nonzero(mask.any(axis=0))[0]
+    if not len(rows):
+        return None
+    return np.s_[max(rows[0] - margin, 0):rows[-1] + margin + 1,
+                 max(cols[0] - margin, 0):cols[-1] + margin + 1]
