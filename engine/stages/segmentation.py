@@ -6,9 +6,9 @@ of colour clusters, not the most saturated colour) only seeds a colour model of 
 the background learnt on a few frames of the sequence (:func:`sequence_colour`,
 :class:`engine.stages.colour_model.ColourModel`). Each frame's pixels are classified by that model:
 sure pixels, and likely ones right beside them (a shade side, a strand darkened under another).
-Specks and pieces shaped like objects rather than cable are removed, the side of the cable its
-colours missed is put back by the cable's shape (:mod:`engine.stages.missing_side`), the
-desaturated specular streak along a glossy cable is filled back in, the outline is refined
+Specks are removed, the side of the cable its colours missed is put back by the cable's shape
+(:mod:`engine.stages.missing_side`), pieces shaped like objects rather than cable are removed,
+the desaturated specular streak along a glossy cable is filled back in, the outline is refined
 along its normal (:func:`refine_edges`), and the cable's width in pixels is measured per frame.
 
 Junctions are where the cable overlaps itself: forks of the mask's skeleton where a disc holds
@@ -148,10 +148,10 @@ class SegmentationSettings:
     side_reach, side_chroma, side_contrast, side_contact : float
         The side of the cable its colours missed is put back
         (:func:`engine.stages.missing_side.with_missing_side`): pixels within ``side_reach``
-        cable widths of the mask that differ from the background around them by more than
-        ``side_chroma`` in chromaticity and ``side_contrast`` in colour, in pieces that run
-        along the mask for at least ``side_contact`` cable widths; ``side_reach`` 0 turns it
-        off.
+        cable widths of the mask's thin pieces that differ from the background around them
+        by more than ``side_chroma`` in chromaticity and ``side_contrast`` in colour, in
+        pieces that run along the mask for at least ``side_contact`` cable widths;
+        ``side_reach`` 0 turns it off. Not with ``all_cables``.
     """
 
     speck_area: float = setting(3.0, low=0, unit="widths²")
