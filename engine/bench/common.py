@@ -52,9 +52,9 @@ def mean_and_worst(rows, keys, *, higher_is_better=()):
         ``("mean", values)`` and ``("worst", values)``; empty when no row is free of errors.
     """
     done = [row for row in rows if "error" not in row]
-    keys = [key for key in keys if done and all(key in row for row in done)]
     if not done:
         return []
+    keys = [key for key in keys if all(key in row for row in done)]
     mean = {key: float(np.mean([row[key] for row in done])) for key in keys}
     worst = {key: float((np.min if key in higher_is_better else np.max)(
         [row[key] for row in done])) for key in keys}
