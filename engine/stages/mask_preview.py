@@ -67,10 +67,10 @@ def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side
     if colour is None:
         colour, model = sequence_colour([image_rgb], None, settings)
     segmentation = segment_frame(image_rgb, colour, settings, model=model)
-    composite = (image_rgb * DIM).astype(np.uint8)
-    np.copyto(composite, image_rgb, where=segmentation.mask[..., None])
+    # in OpenCV's passes: numpy's whole-array arithmetic was a large part of a refresh
+    composite = cv2.convertScaleAbs(np.ascontiguousarray(image_rgb), alpha=DIM)
+    cv2.copyTo(image_rgb, segmentation.mask.view(np.uint8), composite)
     composite[segmentation.junctions & segmentation.mask] = JUNCTION_COLOUR
-    rgba = np.empty(composite.shape[:2] + (4,), dtype=np.float32)
-    np.multiply(composite[::-1], np.float32(1.0 / 255.0), out=rgba[..., :3])
-    rgba[..., 3] = 1.0
+    rgba = cv2.cvtColor(cv2.flip(composite, 0), cv2.COLOR_RGB2RGBA).astype(np.float32)
+    rgba *= np.float32(1.0 / 255.0)
     return MaskPreview(rgba, float(segmentation.mask.mean()), float(segmentation.width))

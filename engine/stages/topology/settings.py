@@ -101,8 +101,8 @@ class TopologySettings:
         Junctions with more branches are paired greedily by bending.
     search_budget : int
         Largest number of combinations of matchings the one-path search tries per cable (when
-        one makes the cable one path it comes early: by the 18th in every hard tuning heap;
-        the whole budget is spent only where none does).
+        one makes the cable one path it comes early in the hard tuning heaps, looked at in
+        script runs; the whole budget is spent only where none does).
     search_window : float
         Having found the most likely combination that makes each cable one path, the search
         weighs the others up to this many log-units less likely (each then weighs under
