@@ -62,12 +62,11 @@ class CameraEstimationSettings:
     ----------
     max_features : int
         SIFT features kept per image. With ``first_octave`` 0, 2048 registers every view of
-        the synthetic scenes and the rendered sample and is about 2.2 times faster than
-        COLMAP's 8192 with ``first_octave`` -1 (30 views at 960x720: 6.5 s instead of 14.5 s
-        on 2 cores; camera centres 0.07% instead of 0.05% of their distance off).
+        the synthetic scenes and the rendered sample (``python -m engine bench cameras``) in
+        much less time than COLMAP's 8192 with ``first_octave`` -1, and nearly as well.
     first_octave : int
         SIFT's first octave: 0 works on the full-size image; COLMAP's -1 first doubles its
-        size, which about triples the extraction time here.
+        size, which makes the extraction several times slower.
     max_image_size : int
         Larger images are downscaled to this many pixels on their long side for SIFT.
     camera_model : str
@@ -293,7 +292,8 @@ def _extract(database, folder, names, settings, focal_length_px, token, cancel, 
             db.update_camera(camera)
         finally:
             db.close()
-    batch = max(8, 4 * (os.cpu_count() or 1))  # ~10% slower than one call; cancel ~0.5 s
+    # a few images a call: each call's fixed cost is shared, and a cancel is seen between calls
+    batch = max(8, 4 * (os.cpu_count() or 1))
     for start in range(0, len(names), batch):
         stage(0.05 + 0.95 * start / len(names), f"features: image {start + 1} of {len(names)}")
         with _colmap_call(cancel, token):

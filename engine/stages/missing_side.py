@@ -15,8 +15,8 @@ differ from the background around them (:func:`with_missing_side`): from its loc
 darker: a shadow beside the cable is not its background) in chromaticity and in colour, and
 from the background's typical colour (in chromaticity, or in colour when lighter: a darker
 pixel of its chromaticity is a darker part of a textured table). A pixel darker than its
-background and of its chromaticity, or far darker, is shadow and never taken. What is taken must look like a
-missing side: pieces that run along the mask (their contact with it at least
+background and of its chromaticity, or far darker, is shadow and never taken. What is taken
+must look like a missing side: pieces that run along the mask (their contact with it at least
 ``side_contact`` cable widths long), at least a cable width square in area, that stop short
 of the search's reach (a piece still unlike the background there is a different thing, lying
 beside the cable). The mixed pixels on the outline's rim differ from the background too, so

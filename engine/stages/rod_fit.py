@@ -13,17 +13,17 @@ Data terms:
   integral over the occupied volume and does not depend on the grid's resolution. "Nearest"
   is taken through the rod smoothed over ``voxel_smoothing`` (see :func:`assign_voxels`): plain
   nearest-vertex assignment is k-means, and in a hull several radii wide it folds the rod into
-  zigzags (1.4 r off on a test scene, against 0.23 r). Assignments are made at the start of
-  each pass and kept during it.
-* **Images** (beyond the paper): the visual hull is fat (voxels lie a median 1.7 r from the
-  centreline, its medial ridge 0.8 r off), so in every view the rod's projected centreline is
-  pulled onto the cable's 2D centre: the ridge of the mask's distance transform, located to a
-  fraction of a pixel. A vertex's residual is its distance from the tangent line of its ridge
-  point, in projected radii, under a Cauchy loss of scale ``image_scale``: a view where the
-  strand is hidden, or where another strand's ridge is nearer, gives a large residual that
-  counts little. Where a vertex projects into a junction mask (grown by ``junction_margin``),
-  the 2D ridge of the X is distorted and the lower strand hidden: its residual there weighs
-  ``junction_weight``. Ridge points are re-matched every Newton iteration, with hysteresis.
+  zigzags. Assignments are made at the start of each pass and kept during it.
+* **Images** (beyond the paper): the visual hull is fat (its voxels lie well over a radius
+  from the centreline, and its medial ridge is off by most of a radius), so in every view
+  the rod's projected centreline is pulled onto the cable's 2D centre: the ridge of the mask's
+  distance transform, located to a fraction of a pixel. A vertex's residual is its distance
+  from the tangent line of its ridge point, in projected radii, under a Cauchy loss of scale
+  ``image_scale``: a view where the strand is hidden, or where another strand's ridge is
+  nearer, gives a large residual that counts little. Where a vertex projects into a junction
+  mask (grown by ``junction_margin``), the 2D ridge of the X is distorted and the lower strand
+  hidden: its residual there weighs ``junction_weight``. Ridge points are re-matched every
+  Newton iteration, with hysteresis.
 * **Contacts**: at a crossing the caller says which strand is over; the over strand's vertices
   are pushed to at least ``2 r (1 + contact_gap)`` above the under strand's vertices within that
   horizontal distance (a one-sided quadratic penalty; ``up`` says what "above" is).
@@ -223,9 +223,8 @@ def _across(smooth):
 
 #: A cable wider than twice this (pixels; 4K and 8K frames) has its ridge found on its mask
 #: reduced by a whole factor (:func:`_reduction`), and its evidence kept in cells of that many
-#: pixels: the ridge's cost and the evidence's memory grow with the square of the width (a 4K
-#: view of a cable 70 pixels wide held 50 MB), and a dozen pixels across the cable place its
-#: centre as well.
+#: pixels: the ridge's cost and the evidence's memory grow with the square of the width, and a
+#: dozen pixels across the cable place its centre as well.
 _WIDE_HALF_WIDTH = 12.0
 #: ... reduced so its half width is about this.
 _REDUCED_HALF_WIDTH = 6.0

@@ -45,8 +45,8 @@ _AROUND = 2.5
 _EDGE_SAMPLE = 7
 
 #: The colour and its model are learnt on frames reduced to at most this (longer side, pixels;
-#: 4K): they are colours, whatever the size (8K reference frames took two minutes, 4K ones
-#: 15 s; at 4096 an 8K frame's search for the cable tried one size more, 20 s).
+#: 4K): they are colours, whatever the size, and the search for the cable on a full 8K frame
+#: is many times slower (`python -m engine bench faults` times four 8K frames end to end).
 _COLOUR_SIZE = 3840
 
 #: :func:`_split_by_hue`: seed pixels of saturation and value at least ``_HUED`` have a hue;
@@ -440,7 +440,7 @@ def cable_width(mask):
     if not len(rows):
         return 0.0
     mask = np.pad(mask[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1], 1)
-    # the 5x5 mask is within 1% of the exact transform here, at a quarter of its cost
+    # the 5x5 mask: close to the exact transform at a fraction of its cost
     distance = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_5)
     ridge = (distance >= cv2.dilate(distance, np.ones((3, 3), np.uint8))) & mask
     # Pixel centres: a band w pixels wide peaks at (w + 1) / 2 when w is odd and at w / 2 on
@@ -889,10 +889,10 @@ def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
     happen to leave the range: on a light background it takes in pixels that are mostly
     background, on a dark one (the cable's shade side and its shadow) it drops pixels that
     are mostly cable. The mask's centre then shifts towards the light, on the synthetic
-    scenes by 0.08 r, and the fitted centreline with it. A threshold between the cable's
-    colour and the background's fails too: the cable darkens towards its outline, and the
-    table next to it. So each pixel within ``reach`` pixels of the outline is decided in two
-    steps, along the outline's normal through it:
+    scenes by a tenth of a radius or so, and the fitted centreline with it. A threshold between
+    the cable's colour and the background's fails too: the cable darkens towards its
+    outline, and the table next to it. So each pixel within ``reach`` pixels of the outline
+    is decided in two steps, along the outline's normal through it:
 
     1. The edge: where the chromaticity, projected on the cable's minus the background's,
        changes fastest. Shading does not change chromaticity, so the cable's darkening
