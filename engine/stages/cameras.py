@@ -62,11 +62,10 @@ class CameraEstimationSettings:
     ----------
     max_features : int
         SIFT features kept per image. With ``first_octave`` 0, 2048 registers every view of
-        the synthetic scenes and the rendered sample (``python -m engine bench cameras``) in
-        much less time than COLMAP's 8192 with ``first_octave`` -1, and nearly as well.
+        the synthetic scenes and the rendered sample (``python -m engine bench cameras``).
     first_octave : int
         SIFT's first octave: 0 works on the full-size image; COLMAP's -1 first doubles its
-        size, which makes the extraction several times slower.
+        size (four times the pixels to search).
     max_image_size : int
         Larger images are downscaled to this many pixels on their long side for SIFT.
     camera_model : str

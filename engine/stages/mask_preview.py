@@ -67,8 +67,9 @@ def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side
     if colour is None:
         colour, model = sequence_colour([image_rgb], None, settings)
     segmentation = segment_frame(image_rgb, colour, settings, model=model)
-    # in OpenCV's passes: numpy's whole-array arithmetic was a large part of a refresh
-    composite = cv2.convertScaleAbs(np.ascontiguousarray(image_rgb), alpha=DIM)
+    # in OpenCV's passes, which are quicker than numpy's on a whole frame (bench preview)
+    image_rgb = np.ascontiguousarray(image_rgb)
+    composite = cv2.convertScaleAbs(image_rgb, alpha=DIM)
     cv2.copyTo(image_rgb, segmentation.mask.view(np.uint8), composite)
     composite[segmentation.junctions & segmentation.mask] = JUNCTION_COLOUR
     rgba = cv2.cvtColor(cv2.flip(composite, 0), cv2.COLOR_RGB2RGBA).astype(np.float32)

@@ -14,8 +14,8 @@ Data terms:
   is taken through the rod smoothed over ``voxel_smoothing`` (see :func:`assign_voxels`): plain
   nearest-vertex assignment is k-means, and in a hull several radii wide it folds the rod into
   zigzags. Assignments are made at the start of each pass and kept during it.
-* **Images** (beyond the paper): the visual hull is fat (its voxels lie well over a radius
-  from the centreline, and its medial ridge is off by most of a radius), so in every view
+* **Images** (beyond the paper): the visual hull is fat, so its voxels and its medial ridge
+  place the centreline only roughly (``bench carve``'s chain distances); so in every view
   the rod's projected centreline is pulled onto the cable's 2D centre: the ridge of the mask's
   distance transform, located to a fraction of a pixel. A vertex's residual is its distance
   from the tangent line of its ridge point, in projected radii, under a Cauchy loss of scale

@@ -45,8 +45,8 @@ _AROUND = 2.5
 _EDGE_SAMPLE = 7
 
 #: The colour and its model are learnt on frames reduced to at most this (longer side, pixels;
-#: 4K): they are colours, whatever the size, and the search for the cable on a full 8K frame
-#: is many times slower (`python -m engine bench faults` times four 8K frames end to end).
+#: 4K): they are colours, whatever the size, and the search for the cable costs with the
+#: frame's pixels.
 _COLOUR_SIZE = 3840
 
 #: :func:`_split_by_hue`: seed pixels of saturation and value at least ``_HUED`` have a hue;
@@ -888,8 +888,8 @@ def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
     A colour range puts the outline wherever a blurred edge pixel's hue, saturation and value
     happen to leave the range: on a light background it takes in pixels that are mostly
     background, on a dark one (the cable's shade side and its shadow) it drops pixels that
-    are mostly cable. The mask's centre then shifts towards the light, on the synthetic
-    scenes by a tenth of a radius or so, and the fitted centreline with it. A threshold between
+    are mostly cable. The mask's centre then shifts towards the light, and the fitted
+    centreline with it. A threshold between
     the cable's colour and the background's fails too: the cable darkens towards its
     outline, and the table next to it. So each pixel within ``reach`` pixels of the outline
     is decided in two steps, along the outline's normal through it:
