@@ -1,8 +1,14 @@
-"""``blender -b --command cable_recon reconstruct IMAGES -o out.blend [options]``.
+"""``blender -b --command cable_recon reconstruct IMAGES -o out.blend [options]``, and
+``blender -b --command cable_recon batch SEQUENCES -o OUT_DIR [options]``: every sequence of a
+folder into a .blend of its own.
 
 Registered with ``bpy.utils.register_cli_command``; the same handler runs with the bpy module
 from Python (``handle_command(["reconstruct", ...])``). Exit codes are the engine's: 0
 success, 2 bad input, 3 reconstruction failed, 130 cancelled.
+
+A batch reconstructs the sequences as the engine's ``batch`` does (:mod:`engine.batch`:
+several side by side, each in a process of its own, resumable), then builds each result's
+.blend here, one after the other, from the startup file as a ``reconstruct`` command would.
 """
 
 import argparse
@@ -11,14 +17,18 @@ from pathlib import Path
 
 import bpy
 
-from ..engine.cli.main import (EXIT_BAD_INPUT, RECONSTRUCT_USAGE, ProgressBar,
-                               add_reconstruct_arguments, reconstruct_arguments,
-                               run_with_exit_code)
+from ..engine.batch import batch_exit_code, run_batch, summary_table
+from ..engine.cli.main import (BATCH_USAGE, EXIT_BAD_INPUT, RECONSTRUCT_USAGE, ProgressBar,
+                               add_batch_arguments, add_reconstruct_arguments, batch_arguments,
+                               reconstruct_arguments, run_with_exit_code)
 from ..engine.cli.settings import add_settings_arguments, settings_from_arguments
 from ..engine.errors import InputError, OutputError
 from ..engine.io.files import check_output_file
+from ..engine.io.result import read_result
+from ..engine.progress import StageProgress
 from ..engine.stages.bezier import BezierSettings
-from .reconstruction import RunRequest, apply_outcome, reconstruct_work, sequence_name
+from .reconstruction import (RunRequest, apply_outcome, outcome_of_result, reconstruct_work,
+                             sequence_name)
 
 __all__ = ["COMMAND", "handle_command", "build_parser"]
 
@@ -39,13 +49,33 @@ def build_parser():
     add_reconstruct_arguments(rebuild)
     rebuild.add_argument("-o", "--output", required=True, metavar="BLEND",
                          help="the .blend to write (never replaced without --overwrite)")
-    rebuild.add_argument("--no-cameras", action="store_true",
-                         help="leave the cameras out of the .blend")
-    rebuild.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    rebuild.add_argument("--debug", action="store_true",
-                         help="an internal error shows its traceback (and is not caught)")
-    add_settings_arguments(rebuild, BezierSettings, prefix="curve", aliases=True)
+    _add_blend_arguments(rebuild)
+    batch = commands.add_parser(
+        "batch", help="a folder of sequences to a .blend each",
+        usage=f"%(prog)s SEQUENCES [--no-cameras] {BATCH_USAGE}",
+        description="Every sequence of a folder to OUT_DIR/<name>.blend (beside the engine's "
+                    "<name>.cable.json, <name>.log and summary.json), several reconstructed "
+                    "side by side; run it again to go on where it stopped.")
+    add_batch_arguments(batch)
+    _add_blend_arguments(batch)
     return parser
+
+
+def _add_blend_arguments(parser):
+    parser.add_argument("--no-cameras", action="store_true",
+                        help="leave the cameras out of the .blend")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--debug", action="store_true",
+                        help="an internal error shows its traceback (and is not caught)")
+    add_settings_arguments(parser, BezierSettings, prefix="curve", aliases=True)
+
+
+def _save(output):
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=str(output), check_existing=False, copy=True)
+    except RuntimeError as error:  # a full disk: Blender's report, first line
+        raise OutputError(f"cannot write {output}: {str(error).strip().splitlines()[0]}") \
+            from None
 
 
 def _reconstruct(args):
@@ -64,16 +94,48 @@ def _reconstruct(args):
     progress = (lambda fraction, message: None) if args.quiet else ProgressBar()
     outcome = reconstruct_work(request)(progress, None)
     obj = apply_outcome(bpy.context, request, outcome)
-    try:
-        bpy.ops.wm.save_as_mainfile(filepath=str(output), check_existing=False, copy=True)
-    except RuntimeError as error:  # a full disk: Blender's report, first line
-        raise OutputError(f"cannot write {output}: {str(error).strip().splitlines()[0]}") \
-            from None
+    _save(output)
     result = outcome.state.result
     for warning in outcome.warnings:
         print(f"warning: {warning}", file=sys.stderr)
     print(f"{obj.name}: {len(result.paths)} path(s), {len(result.crossings)} crossing(s), "
           f"{outcome.report['control_points']} control points -> {output}", file=sys.stderr)
+
+
+def _batch(args):
+    arguments = batch_arguments(args)
+    output = Path(arguments["output"]).resolve()
+    progress = StageProgress((lambda fraction, message: None) if args.quiet else ProgressBar())
+    outcomes = run_batch(**arguments, progress=progress.part(0.0, 0.9))
+    curve = settings_from_arguments(BezierSettings, args, prefix="curve")
+    inputs = arguments["inputs"]
+    made = [(s, o) for s, o in zip(arguments["sequences"], outcomes)
+            if o.status in ("done", "skipped")]
+    kept = []
+    for number, (sequence, outcome) in enumerate(made):
+        blend = output / f"{sequence.name}.blend"
+        progress.part(0.9, 1.0)(number / len(made), f"{blend.name}")
+        if blend.exists() and not args.overwrite:
+            kept.append(blend.name)
+            continue
+        images = str(sequence.images.resolve())
+        folder = sequence.folder.resolve()
+        request = RunRequest(
+            images=images, name=sequence_name(images),
+            cameras=str(folder / args.cameras) if args.cameras else None,
+            masks=str(folder / args.masks) if args.masks else None, hsv=inputs.hsv,
+            diameter=inputs.diameter, length=inputs.length, settings=arguments["settings"],
+            curve=curve, with_cameras=not args.no_cameras)
+        result = read_result(output / f"{sequence.name}.cable.json")
+        bpy.ops.wm.read_homefile()  # each .blend starts as a reconstruct command's does
+        apply_outcome(bpy.context, request, outcome_of_result(result, request))
+        _save(blend)
+    progress(1.0, "done")
+    print(summary_table(outcomes), file=sys.stderr)
+    if kept:
+        print(f"kept (--overwrite replaces them): {', '.join(kept)}", file=sys.stderr)
+    print(f"{len(made) - len(kept)} .blend file(s) written to {output}", file=sys.stderr)
+    return batch_exit_code(outcomes)
 
 
 def handle_command(argv):
@@ -83,4 +145,5 @@ def handle_command(argv):
         args = parser.parse_args(argv)
     except SystemExit as exit_:  # argparse printed the usage and the reason
         return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
-    return run_with_exit_code(_reconstruct, args, debug=args.debug)
+    run = _batch if args.command == "batch" else _reconstruct
+    return run_with_exit_code(run, args, debug=args.debug)

@@ -17,7 +17,8 @@ from pathlib import Path
 import bpy
 
 from ..engine.errors import InputError
-from ..engine.pipeline import PipelineSettings, RunInputs, run_reconstruction
+from ..engine.pipeline import (PipelineSettings, Reconstruction, RunInputs,
+                               run_reconstruction)
 from ..engine.progress import StageProgress
 from ..engine.settings import settings_from_dict
 from ..engine.stages.bezier import BezierSettings, fit_result_curves
@@ -29,7 +30,7 @@ from .scene_objects import (add_cable_materials, build_bezier_curve, build_camer
 from .settings_properties import settings_from_group
 
 __all__ = ["RunRequest", "Outcome", "request_from_scene", "reconstruct_work", "flip_work",
-           "apply_outcome", "sessions", "sequence_name"]
+           "apply_outcome", "outcome_of_result", "sessions", "sequence_name"]
 
 #: Engine state of the last runs, by run id (to flip a crossing without re-running it all).
 sessions = OrderedDict()
@@ -165,6 +166,19 @@ def _curves(state, request, progress):
     return Outcome(state, curves, report)
 
 
+@dataclass(frozen=True, eq=False)
+class _ReadResult:
+    """The engine state of a result read from a file: the result alone (a flip re-runs the
+    reconstruction from the arguments stored on the curve, as after Blender restarts)."""
+
+    result: object
+
+
+def outcome_of_result(result, request):
+    """The :class:`Outcome` of a result read from a file (the Bézier curves fitted to it)."""
+    return _curves(_ReadResult(result), request, lambda fraction, message: None)
+
+
 def reconstruct_work(request):
     """``work(progress, cancel)``: the whole reconstruction, then the Bézier curves."""
     def work(progress, cancel):
@@ -253,7 +267,8 @@ def apply_outcome(context, request, outcome):
 def _remember(obj, request, outcome):
     result, props = outcome.state.result, obj.cable_recon
     run = uuid.uuid4().hex
-    sessions[run] = outcome.state
+    if isinstance(outcome.state, Reconstruction):  # a result read from a file cannot flip
+        sessions[run] = outcome.state
     while len(sessions) > MAX_SESSIONS:
         sessions.popitem(last=False)
     props.run = run

@@ -21,7 +21,8 @@ DEVELOPER = ("engine.synthetic", "engine.evaluation", "engine.bench")
 #: an earlier one (errors, progress and settings are what every rank reports and is tuned with).
 RANKS = {"engine.errors": 0, "engine.progress": 0, "engine.settings": 0, "engine.__version__": 0,
          "engine.geometry": 1, "engine.io": 2,
-         "engine.stages": 3, "engine.pipeline": 4, "engine.cli": 5, "engine": 6,
+         "engine.stages": 3, "engine.pipeline": 4, "engine.batch": 4, "engine.cli": 5,
+         "engine": 6,
          "engine.__main__": 6}
 
 
@@ -109,7 +110,7 @@ print(sorted(build_parser()._subparsers._group_actions[0].choices))
     run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                          cwd=tmp_path, timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
-    assert run.stdout.split("\n")[0] == "['cameras', 'reconstruct', 'segment']"
+    assert run.stdout.split("\n")[0] == "['batch', 'cameras', 'reconstruct', 'segment']"
     assert sorted(path.name for path in (tmp_path / "engine").iterdir()
                   if path.is_dir()) == ["cli", "geometry", "io", "stages"]
 

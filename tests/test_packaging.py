@@ -158,3 +158,4 @@ def test_installed_through_blenders_installer(linux_zip, tmp_path):
     np.testing.assert_allclose(curve["knots"], curves[0].knots, atol=1e-4 * api.radius)
     assert curve["crossings"] == len(api.crossings) == 1
     assert report["batch_exit"] == 0 and report["batch_objects"] == ["loop"]
+    assert report["batch_folder_exit"] == 0 and report["batch_folder"] == ["loop.blend"]

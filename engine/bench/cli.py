@@ -7,7 +7,7 @@ from ..errors import InputError
 __all__ = ["STAGES", "add_bench_command", "run_bench"]
 
 STAGES = ("segment", "looks", "cameras", "carve", "rod", "pipeline", "pipeline-looks", "topology",
-          "faults", "preview", "curve", "cancel", "memory")
+          "faults", "preview", "curve", "cancel", "memory", "batch")
 
 
 def add_bench_command(commands, *, parents=()):
@@ -20,8 +20,8 @@ def add_bench_command(commands, *, parents=()):
     bench.add_argument("--views", type=int, default=30, help="views per synthetic scene")
     bench.add_argument("--seeds", type=int, default=3,
                        help="scenes per family and seed set (looks, pipeline-looks, "
-                            "topology, pipeline), per family (segment, carve) or in all "
-                            "(cameras, rod)")
+                            "topology, pipeline), per family (segment, carve), in all "
+                            "(cameras, rod) or the sequences (batch)")
     bench.add_argument("--families", metavar="NAMES",
                        help="comma-separated families: look families (looks, pipeline-looks: "
                             "those only, without the Cycles captures and real photos) or "
@@ -107,6 +107,11 @@ def run_bench(args):
         rows = bench_memory(progress=None if args.quiet else ProgressBar())
         print(format_table(rows, MEMORY_COLUMNS))
         return
+    elif args.stage == "batch":
+        from .batch import bench_batch
+
+        rows = bench_batch(sequences=args.seeds, views=args.views,
+                           progress=None if args.quiet else ProgressBar())
     elif args.stage == "faults":
         from .faults import bench_faults
 

@@ -20,7 +20,8 @@ from .settings import (PIPELINE_GROUPS, add_pipeline_arguments, checked_type,
                        pipeline_from_arguments)
 
 __all__ = ["main", "build_parser", "add_reconstruct_arguments", "reconstruct_arguments",
-           "run_with_exit_code", "ProgressBar"]
+           "add_batch_arguments", "batch_arguments", "run_with_exit_code", "ProgressBar",
+           "RECONSTRUCT_USAGE", "BATCH_USAGE"]
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_FAILED, EXIT_BUG = 0, 2, 3, 4
 log = logging.getLogger(__name__)
@@ -116,9 +117,13 @@ def _run_cameras(args):
     log.info("%d cameras written to %s", len(estimate.cameras), args.output)
 
 
-#: The usage line of a reconstruction's options (the settings flags are too many to list).
-RECONSTRUCT_USAGE = ("[--cameras MODEL_DIR] [--masks MASKS_DIR] [--diameter MM | --length M] "
-                     "[--hsv H1,S1,V1,H2,S2,V2] [--overwrite] [--settings RUN_JSON] [SETTINGS ...]")
+#: The usage line of the options every run takes (the settings flags are too many to list).
+_RUN_USAGE = ("[--diameter MM | --length M] [--hsv H1,S1,V1,H2,S2,V2] [--overwrite] "
+              "[--settings RUN_JSON] [SETTINGS ...]")
+#: The usage line of a reconstruction's options.
+RECONSTRUCT_USAGE = f"[--cameras MODEL_DIR] [--masks MASKS_DIR] {_RUN_USAGE}"
+#: The usage line of a batch's options.
+BATCH_USAGE = f"[-o OUT_DIR] [--jobs N] [--cameras NAME] [--masks NAME] {_RUN_USAGE}"
 
 
 def add_reconstruct_arguments(parser):
@@ -131,6 +136,29 @@ def add_reconstruct_arguments(parser):
     parser.add_argument("--masks", metavar="MASKS_DIR",
                         help="masks written by 'segment' (possibly edited), used instead of "
                              "segmenting")
+    _add_common_arguments(parser)
+
+
+def add_batch_arguments(parser):
+    """The inputs and options of a batch (``batch`` and the add-on's ``batch`` command; read
+    back with :func:`batch_arguments`): a folder of sequences instead of one, each given the
+    same settings; ``--cameras`` and ``--masks`` name a folder inside each sequence's."""
+    parser.add_argument("sequences", help="folder of sequences: folders of .jpg/.png frames "
+                                          "(or each with an images/ folder of them), or videos")
+    parser.add_argument("-o", "--output", metavar="OUT_DIR",
+                        help="output folder (default: <sequences folder name>.results here)")
+    parser.add_argument("--jobs", type=int, metavar="N",
+                        help="sequences reconstructed side by side (default: the machine's "
+                             "cores)")
+    parser.add_argument("--cameras", metavar="NAME",
+                        help="the COLMAP model of each sequence, a folder of that name inside "
+                             "it, e.g. sparse (default: estimate the cameras)")
+    parser.add_argument("--masks", metavar="NAME",
+                        help="the masks of each sequence, a folder of that name inside it")
+    _add_common_arguments(parser)
+
+
+def _add_common_arguments(parser):
     scale = parser.add_mutually_exclusive_group()
     scale.add_argument("--diameter", type=float, metavar="MM",
                        help="the cable's measured diameter in mm: the result is in metres")
@@ -142,19 +170,47 @@ def add_reconstruct_arguments(parser):
     _add_run_arguments(parser, PIPELINE_GROUPS)
 
 
+def _settings_and_inputs(args):
+    """The run's settings and its colour and scale: the flags given, else what a run read
+    with ``--settings`` gives."""
+    from ..pipeline import RunInputs
+
+    settings, inputs = _run_settings(args, PIPELINE_GROUPS)
+    hsv = args.hsv or inputs.hsv
+    if hsv:
+        from ..stages.colour_range import ColourRange
+
+        hsv = str(ColourRange.parse(hsv))
+    diameter, length = args.diameter, args.length
+    if diameter is None and length is None:
+        diameter, length = inputs.diameter, inputs.length
+    return settings, RunInputs(hsv=hsv, diameter=diameter, length=length)
+
+
 def reconstruct_arguments(args):
     """Keyword arguments of :func:`engine.pipeline.run_reconstruction` from parsed arguments
     (a run read with ``--settings`` gives the colour and scale the command line does not)."""
     from ..stages.segmentation import ColourRange
 
-    settings, inputs = _run_settings(args, PIPELINE_GROUPS)
-    hsv = args.hsv or inputs.hsv
-    diameter, length = args.diameter, args.length
-    if diameter is None and length is None:
-        diameter, length = inputs.diameter, inputs.length
+    settings, inputs = _settings_and_inputs(args)
     return dict(images=args.images, cameras=args.cameras, masks=args.masks,
-                colour=ColourRange.parse(hsv) if hsv else None,
-                diameter=diameter, length=length, settings=settings)
+                colour=ColourRange.parse(inputs.hsv) if inputs.hsv else None,
+                diameter=inputs.diameter, length=inputs.length, settings=settings)
+
+
+def batch_arguments(args):
+    """Keyword arguments of :func:`engine.batch.run_batch` (but ``progress`` and ``cancel``)
+    from parsed arguments."""
+    from ..batch import find_sequences
+
+    if args.jobs is not None and args.jobs < 1:
+        raise InputError("--jobs must be 1 or more")
+    settings, inputs = _settings_and_inputs(args)
+    sequences = find_sequences(args.sequences)
+    output = args.output or Path(args.sequences).resolve().name + ".results"
+    return dict(sequences=sequences, output=output, settings=settings, inputs=inputs,
+                cameras=args.cameras, masks=args.masks, jobs=args.jobs,
+                overwrite=args.overwrite)
 
 
 def _run_reconstruct(args):
@@ -197,7 +253,8 @@ def build_parser():
                        help="only print errors")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    for add in (_add_segment_command, _add_cameras_command, _add_reconstruct_command):
+    for add in (_add_segment_command, _add_cameras_command, _add_reconstruct_command,
+                _add_batch_command):
         add(commands, quiet)
     bench = _developer_bench()
     if bench is not None:  # a developer checkout: the extension leaves engine.bench out
@@ -258,6 +315,34 @@ def _add_reconstruct_command(commands, quiet):
                          help="result file (default: <images folder name>.cable.json here)")
     rebuild.add_argument("--obj", metavar="OBJ", help="also write the cable as an OBJ tube mesh")
     rebuild.set_defaults(run=_run_reconstruct)
+
+
+def _add_batch_command(commands, quiet):
+    """``batch SEQUENCES``: one result per sequence and a summary."""
+    batch = commands.add_parser(
+        "batch", parents=[quiet], help="reconstruct every sequence in a folder",
+        usage=f"%(prog)s SEQUENCES [--obj] {BATCH_USAGE}",
+        description="Reconstruct every sequence in a folder, each as 'reconstruct' would and "
+                    "with the same settings, several side by side: OUT_DIR/<name>.cable.json "
+                    "(and .obj), <name>.log and summary.json. Run it again to go on: "
+                    "sequences with a result made with the same settings are skipped, failed "
+                    "ones are tried again. Exit code 0 when every sequence has its result, "
+                    "else the highest of the failed ones' (2, 3, 4), 130 if cancelled.")
+    add_batch_arguments(batch)
+    batch.add_argument("--obj", action="store_true",
+                       help="also write each cable as an OBJ tube mesh")
+    batch.set_defaults(run=_run_batch)
+
+
+def _run_batch(args):
+    from ..batch import batch_exit_code, run_batch, summary_table
+
+    arguments = batch_arguments(args)
+    log.info("%d sequence(s) -> %s", len(arguments["sequences"]), arguments["output"])
+    outcomes = run_batch(**arguments, obj=args.obj,
+                         progress=None if args.quiet else ProgressBar())
+    log.info("%s", summary_table(outcomes))
+    return batch_exit_code(outcomes)
 
 
 def _developer_bench():

@@ -59,4 +59,10 @@ report["batch_exit"] = batch.handle_command(
      str(Path(scene_dir) / "sparse"), "-o", out_blend, "-q"])
 bpy.ops.wm.open_mainfile(filepath=out_blend)
 report["batch_objects"] = sorted(o.name for o in bpy.data.objects if o.type == "CURVE")
+# A folder of sequences (the capture's own folder holds the one): each run in a process of its
+# own, which finds the engine and the wheels where the installer put them.
+shots = Path(out_blend).parent / "shots"
+report["batch_folder_exit"] = batch.handle_command(
+    ["batch", str(Path(scene_dir).parent), "-o", str(shots), "--cameras", "sparse", "-q"])
+report["batch_folder"] = sorted(p.name for p in shots.glob("*.blend"))
 print("REPORT " + json.dumps(report))
