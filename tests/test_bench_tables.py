@@ -64,3 +64,37 @@ def test_bench_segment_summarises_each_family_over_its_seeds(tmp_path, monkeypat
     assert worst["iou_mean"] == min(rows[0]["iou_mean"], rows[1]["iou_mean"])
     assert worst["ms_per_frame"] == max(rows[0]["ms_per_frame"], rows[1]["ms_per_frame"])
     assert 0.5 < worst["iou_mean"] <= 1.0
+
+
+def test_a_profile_charges_each_engine_function_its_library_calls_but_not_its_callees():
+    import time
+
+    import cv2
+    import numpy as np
+
+    from engine.bench.profile import profiled, top_functions
+    from engine.stages.segmentation import cable_width, junction_centres
+
+    mask = np.zeros((400, 600), dtype=bool)
+    cv2.line(mask.view(np.uint8), (20, 20), (580, 380), 1, 9)
+    cv2.line(mask.view(np.uint8), (20, 380), (580, 20), 1, 9)
+
+    def work():
+        started = time.perf_counter()
+        centres = [junction_centres(mask, cable_width(mask)) for _ in range(5)]
+        return centres[0], time.perf_counter() - started
+
+    (centres, elapsed), times = profiled(work)
+    assert len(centres) == 1
+    assert all(label.startswith("engine.") for label in times)  # not numpy's nor OpenCV's
+    thin = times["engine.stages.skeleton_2d.thin"]
+    assert thin[1] == 5 and thin[0] > 0
+    # each caller is charged its own work only: together they are the run, not more
+    assert 0.8 * elapsed < sum(seconds for seconds, _ in times.values()) <= 1.01 * elapsed
+    rows = top_functions([("true", times), ("true", times)], count=3)
+    functions = [row for row in rows if row["function"] != "(all of the stage)"]
+    assert len(functions) == 3 and functions[0]["scenes"] == "2/2"
+    assert functions[0]["seconds"] >= functions[1]["seconds"] >= functions[2]["seconds"]
+    stages = [row for row in rows if row["function"] == "(all of the stage)"]
+    assert stages[0]["stage"] == "masks"
+    assert sum(row["share"] for row in stages) == pytest.approx(1.0)

@@ -7,7 +7,7 @@ from ..errors import InputError
 __all__ = ["STAGES", "add_bench_command", "run_bench"]
 
 STAGES = ("segment", "looks", "cameras", "carve", "rod", "pipeline", "pipeline-looks", "topology",
-          "faults", "preview", "curve", "cancel", "memory", "batch")
+          "faults", "preview", "curve", "cancel", "memory", "batch", "scaling")
 
 
 def add_bench_command(commands, *, parents=()):
@@ -28,6 +28,9 @@ def add_bench_command(commands, *, parents=()):
                             "easy, hard (topology: those only, without the Cycles captures)")
     bench.add_argument("--sample", default="samples/sequence",
                        help="the realistic sample's folder (skipped if missing)")
+    bench.add_argument("--profile", action="store_true",
+                       help="pipeline: run each reconstruction under cProfile and print the "
+                            "functions that took its time after the table")
     bench.add_argument("--ours-only", action="store_true",
                        help="pipeline-looks: only the rows of our masks (not the naive "
                             "threshold's or the exact masks', which no setting changes)")
@@ -107,6 +110,12 @@ def run_bench(args):
         rows = bench_memory(progress=None if args.quiet else ProgressBar())
         print(format_table(rows, MEMORY_COLUMNS))
         return
+    elif args.stage == "scaling":
+        from .scaling import SCALING_COLUMNS, bench_scaling
+
+        rows = bench_scaling(progress=None if args.quiet else ProgressBar())
+        print(format_table(rows, SCALING_COLUMNS))
+        return
     elif args.stage == "batch":
         from .batch import bench_batch
 
@@ -136,7 +145,15 @@ def run_bench(args):
                                     **_family_options(args))
     else:
         from .pipeline import bench_pipeline
+        from .profile import PROFILE_COLUMNS
 
         rows = bench_pipeline(views=args.views, sample=args.sample, seeds=args.seeds,
-                              progress=None if args.quiet else ProgressBar())
+                              progress=None if args.quiet else ProgressBar(),
+                              profile=args.profile)
+        if args.profile:
+            rows, functions = rows
+            print(format_table(rows))
+            print()
+            print(format_table(functions, PROFILE_COLUMNS))
+            return
     print(format_table(rows))

@@ -18,6 +18,7 @@ from ..io.ground_truth import read_ground_truth
 from ..stages.mask_checks import CHECK_HINT
 from ..synthetic.scene import SceneSpec, make_scene, write_scene
 from .common import DEFAULT_SAMPLE, in_fresh_process, mean_and_worst
+from .profile import profiled, top_functions
 
 __all__ = ["bench_pipeline", "pipeline_suite", "bench_pipeline_looks", "scored_run"]
 
@@ -45,10 +46,13 @@ def pipeline_suite(views=30):
     ]
 
 
-def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, details=False):
+def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, details=False,
+               profile=False):
     """In a fresh process: reconstruct one capture (with ``masks`` if given, and ``settings``,
     a :class:`.pipeline.PipelineSettings`, if given) and score it; with ``details``, the row
-    also holds ``checks``: ``(right, confidence)`` of each true crossing.
+    also holds ``checks``: ``(right, confidence)`` of each true crossing; with ``profile``,
+    the reconstruction runs under cProfile, on one thread (OpenCV's and the carving's too),
+    and the row holds ``profile`` (:func:`engine.bench.profile.engine_times`).
 
     The process may use at most :data:`MEMORY_LIMIT` bytes: a run past it is a row with its
     error, not a machine out of memory.
@@ -62,11 +66,21 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, 
     truth = read_ground_truth(truth_file)
     folder = Path(folder)
     started = time.perf_counter()
+    if profile:  # on one thread: cProfile cannot tell threads' calls apart
+        import cv2
+
+        from ..pipeline import PipelineSettings
+
+        cv2.setNumThreads(1)
+        settings = settings or PipelineSettings()
+        settings = replace(settings, carving=replace(settings.carving, threads=1))
+    inputs = dict(cameras=folder / "sparse" if use_true_cameras else None, masks=masks,
+                  **({} if settings is None else {"settings": settings}))
     try:
-        state = run_reconstruction(folder / "images",
-                                   cameras=folder / "sparse" if use_true_cameras else None,
-                                   masks=masks, **({} if settings is None
-                                                   else {"settings": settings}))
+        if profile:
+            state, times = profiled(run_reconstruction, folder / "images", **inputs)
+        else:
+            state = run_reconstruction(folder / "images", **inputs)
     except (ReconstructionError, ValueError, MemoryError) as error:
         return {"error": str(error)[:80], "total_s": time.perf_counter() - started}
     except Exception as error:  # a bug: the row says so, the bench goes on
@@ -90,6 +104,8 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, 
     if details:
         row["checks"] = [(bool(check.right), check.confidence)
                          for check in metrics.crossing_details]
+    if profile:
+        row["profile"] = times
     return row
 
 
@@ -117,7 +133,7 @@ def _confident_right(metrics):
 
 
 def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, seeds=1,
-                   progress=None):
+                   progress=None, profile=False):
     """Reconstruct every scene of the suite (see the module notes).
 
     Parameters
@@ -133,10 +149,15 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, seeds=1,
         Also run with pycolmap's cameras.
     progress : callable, optional
         ``progress(fraction, message)`` over the scenes.
+    profile : bool, optional
+        Run each reconstruction under cProfile (slower: read the rows' times against each
+        other only) and return the functions that took its time too.
 
     Returns
     -------
     list of dict
+        The rows; with ``profile``, ``(rows, functions)``: the costliest functions over the
+        runs of each camera source (:func:`engine.bench.profile.top_functions`).
     """
     runs = [(True, "true"), (False, "pycolmap")] if estimated else [(True, "true")]
     scenes = []
@@ -159,11 +180,14 @@ def bench_pipeline(*, views=30, sample=DEFAULT_SAMPLE, estimated=True, seeds=1,
             for use_true, camera_label in runs:
                 row = {"scene": label, "cameras": camera_label}
                 row.update(in_fresh_process(scored_run, str(folder),
-                                            str(folder / "ground_truth.json"), use_true))
+                                            str(folder / "ground_truth.json"), use_true,
+                                            None, None, False, profile))
                 rows.append(row)
     if progress is not None:
         progress(1.0, "done")
-    return rows if seeds == 1 else _with_spread(rows)
+    times = [(row["cameras"], row.pop("profile")) for row in rows if "profile" in row]
+    rows = rows if seeds == 1 else _with_spread(rows)
+    return (rows, top_functions(times)) if profile else rows
 
 
 #: What a family's mean and worst rows summarise (the worst is the largest of each).

@@ -36,6 +36,7 @@ import logging
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import cv2
@@ -454,7 +455,8 @@ def _carve_levels(views, lower, side, fine, radius, settings, stage, cancel):
     index = np.argwhere(np.ones((cells,) * 3, dtype=bool)).astype(np.int64)
     steps = levels + 1
     threads = settings.threads or os.cpu_count() or 1
-    with ThreadPoolExecutor(threads, thread_name_prefix="carve") as pool:
+    with (ThreadPoolExecutor(threads, thread_name_prefix="carve") if threads > 1
+          else nullcontext(_ThisThread())) as pool:
         for level in range(levels, -1, -1):
             size = fine * 2 ** level
             carver = _Carver(views, lower, settings, pool,
@@ -474,6 +476,15 @@ def _carve_levels(views, lower, side, fine, radius, settings, stage, cancel):
                   f"{len(index):,} occupied voxels ({core:,} in the core)")
     stage(1.0, "carved")
     return _grid(index, junction[large], counted[large], hits[large], lower, fine, radius)
+
+
+class _ThisThread:
+    """A pool of one thread, this one: the votes in order, with no worker to hand them to
+    (a profiler then sees the work where it is asked for)."""
+
+    @staticmethod
+    def map(function, items):
+        return map(function, items)
 
 
 class _OverBudget(ReconstructionError):
