@@ -85,9 +85,12 @@ def _reconstruct(args):
     check_output_file(output, overwrite=args.overwrite)  # before the work, not when saved
     engine = reconstruct_arguments(args)
     images = str(Path(engine["images"]).resolve())
+    # absolute: a flip after the .blend is reopened re-runs from these, wherever Blender runs
+    cameras, masks = (str(Path(engine[key]).resolve()) if engine[key] else None
+                      for key in ("cameras", "masks"))
     request = RunRequest(
-        images=images, name=sequence_name(images), cameras=engine["cameras"],
-        masks=engine["masks"], hsv=str(engine["colour"]) if engine["colour"] else None,
+        images=images, name=sequence_name(images), cameras=cameras,
+        masks=masks, hsv=str(engine["colour"]) if engine["colour"] else None,
         diameter=engine["diameter"], length=engine["length"], settings=engine["settings"],
         curve=settings_from_arguments(BezierSettings, args, prefix="curve"),
         with_cameras=not args.no_cameras)

@@ -1,5 +1,6 @@
 """The Blender experience with real bpy: settings, live preview, Reconstruct, Flip, batch."""
 
+import json
 import threading
 
 import bpy
@@ -213,7 +214,8 @@ def test_flipping_a_crossing_swaps_it_and_refits(empty_scene, capture):
     truth = read_ground_truth(capture / "ground_truth.json")
     configure(empty_scene, capture, with_cameras=False)
     bpy.ops.cable_recon.reconstruct()
-    before = [(c.over_index, c.under_index) for c in bpy.data.objects["twist"].cable_recon.crossings]
+    before = [(c.over_index, c.under_index)
+              for c in bpy.data.objects["twist"].cable_recon.crossings]
     assert bpy.ops.cable_recon.flip_crossing(index=1) == {"FINISHED"}
     obj = bpy.data.objects["twist"]
     after = [(c.over_index, c.under_index) for c in obj.cable_recon.crossings]
@@ -387,19 +389,25 @@ def test_batch_command_names_an_output_it_cannot_write_before_the_work(addon, ca
 
 
 def test_batch_command_writes_a_blend_that_reopens_with_the_curve(addon, capture, tmp_path,
-                                                                  capsys):
+                                                                  capsys, monkeypatch):
     from cable_reconstruction.addon.batch_command import handle_command
 
     bpy.ops.wm.read_homefile(use_empty=True)
     output = tmp_path / "twist.blend"
-    code = handle_command(["reconstruct", str(capture / "images"), "--cameras",
-                           str(capture / "sparse"), "-o", str(output), "--no-cameras", "-q"])
+    monkeypatch.chdir(capture)  # paths relative to where the command runs
+    code = handle_command(["reconstruct", "images", "--cameras", "sparse", "-o", str(output),
+                           "--no-cameras", "-q"])
+    monkeypatch.undo()
     assert code == 0, capsys.readouterr().err
     assert "control points" in capsys.readouterr().err
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.wm.open_mainfile(filepath=str(output))
     obj = bpy.data.objects["twist"]
     assert obj.type == "CURVE" and obj.data.splines[0].type == "BEZIER"
+    # stored absolute, so a flip after the file is reopened elsewhere finds them
+    stored = json.loads(obj.cable_recon.arguments)
+    assert stored["images"] == str((capture / "images").resolve())
+    assert stored["cameras"] == str((capture / "sparse").resolve())
     assert not [o for o in bpy.data.objects if o.type == "CAMERA"]
     before = output.read_bytes()
     again = handle_command(["reconstruct", str(capture / "images"), "-o", str(output), "-q"])

@@ -1,4 +1,5 @@
-"""Voxel carving (§3.2) on ground-truth scenes: coarse to fine is exact, the hull holds the cable."""
+"""Voxel carving (§3.2) on ground-truth scenes: coarse to fine is exact, the hull holds the
+cable."""
 
 import threading
 from dataclasses import replace

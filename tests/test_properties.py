@@ -139,7 +139,8 @@ ARGUMENTS = st.sampled_from([
     "reconstruct", "segment", "--hsv", "1,2,3,4,5,6", "1,2,3", "-1,0,0,0,0,0", "--auto",
     "--cameras", "--masks", "--diameter", "--length", "0", "-3", "nan", "1e400", "-o",
     "--overwrite", "--reference-frame", "99", "--memory-mb", "--vote", "2", "0.5", "-q",
-    "--no-agreement", "/nonexistent/folder", "x.json", "--obj", "--edge-reach", "--voxels-per-radius"])
+    "--no-agreement", "/nonexistent/folder", "x.json", "--obj", "--edge-reach",
+    "--voxels-per-radius"])
 
 
 @SLOW
