@@ -137,6 +137,23 @@ def test_automatic_colour_finds_the_cable(scene):
     assert np.mean(scores) > 0.9 and min(scores) > 0.85
 
 
+def test_the_preview_with_a_colour_is_the_frames_mask(scene):
+    # the preview learns its colour model from a quarter of the pixels: the mask it shows is
+    # still the one segmenting the frame gives, to a few of the outline's pixels
+    from engine.stages.mask_preview import mask_preview
+
+    colour = auto_colour(scene.images[0])
+    for image in scene.images[:4]:
+        preview = mask_preview(image, colour)
+        # the cable is shown as it is, the rest dimmed (dark pixels cannot tell)
+        shown = (np.abs(255 * preview.pixels[::-1, :, :3] - image) < 0.6).all(axis=-1)
+        full = segment_frame(image, colour)  # with the model learnt from every pixel
+        plain = image.max(axis=-1) > 8  # nor can junctions, shown in magenta
+        plain &= ~(cv2.dilate(full.junctions.view(np.uint8), np.ones((9, 9), np.uint8)) > 0)
+        assert iou(shown & plain, full.mask & plain) > 0.97
+        assert preview.width == pytest.approx(full.width, abs=0.5)
+
+
 def centre_shift(mask, truth):
     """Mean offset (pixels) of the mask's middle from the exact mask's, across the cable
     along the image's x axis, over rows where each holds one run of cable pixels."""

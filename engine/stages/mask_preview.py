@@ -2,7 +2,8 @@
 
 The add-on shows it in an Image Editor while the user tunes the cable colour, so it must be
 quick (``python -m engine bench preview`` measures it): one segmentation of the chosen frame
-and a composite, shrunk to at most ``max_side`` pixels.
+and a composite, shrunk to at most ``max_side`` pixels. With a colour range given, the colour
+model the frame is segmented with is learnt from a quarter of its pixels.
 """
 
 from dataclasses import dataclass
@@ -10,7 +11,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .segmentation import SegmentationSettings, segment_frame, sequence_colour
+from .segmentation import (SegmentationSettings, learn_colour_model, segment_frame,
+                           sequence_colour)
 
 __all__ = ["MaskPreview", "mask_preview"]
 
@@ -66,6 +68,12 @@ def mask_preview(image_rgb, colour, settings=SegmentationSettings(), *, max_side
     model = None
     if colour is None:
         colour, model = sequence_colour([image_rgb], None, settings)
+    elif settings.model:
+        # each refresh (a dragged slider: a new colour each time) learns the colour model; a
+        # quarter of the frame's pixels, every second one of every second row, hold its
+        # colours as well and take a quarter of the time (none found: learnt from the whole)
+        model = learn_colour_model([np.ascontiguousarray(image_rgb[::2, ::2])], colour,
+                                   settings)
     segmentation = segment_frame(image_rgb, colour, settings, model=model)
     # in OpenCV's passes, which are quicker than numpy's on a whole frame (bench preview)
     image_rgb = np.ascontiguousarray(image_rgb)
