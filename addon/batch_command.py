@@ -8,7 +8,9 @@ success, 2 bad input, 3 reconstruction failed, 130 cancelled.
 
 A batch reconstructs the sequences as the engine's ``batch`` does (:mod:`engine.batch`:
 several side by side, each in a process of its own, resumable), then builds each result's
-.blend here, one after the other, from the startup file as a ``reconstruct`` command would.
+.blend here, one after the other, each from the file Blender started with (the startup file
+if none) as a ``reconstruct`` command would: the open file is reloaded for each, so with the
+bpy module, unsaved changes to it are lost.
 """
 
 import argparse
@@ -17,7 +19,7 @@ from pathlib import Path
 
 import bpy
 
-from ..engine.batch import batch_exit_code, run_batch, summary_table
+from ..engine.batch import batch_exit_code, run_batch, sequence_outputs, summary_table
 from ..engine.cli.main import (BATCH_USAGE, EXIT_BAD_INPUT, RECONSTRUCT_USAGE, ProgressBar,
                                add_batch_arguments, add_reconstruct_arguments, batch_arguments,
                                reconstruct_arguments, run_with_exit_code)
@@ -114,7 +116,7 @@ def _batch(args):
     inputs = arguments["inputs"]
     made = [(s, o) for s, o in zip(arguments["sequences"], outcomes)
             if o.status in ("done", "skipped")]
-    kept = []
+    kept, started_with = [], bpy.data.filepath
     for number, (sequence, outcome) in enumerate(made):
         blend = output / f"{sequence.name}.blend"
         progress.part(0.9, 1.0)(number / len(made), f"{blend.name}")
@@ -129,8 +131,11 @@ def _batch(args):
             masks=str(folder / args.masks) if args.masks else None, hsv=inputs.hsv,
             diameter=inputs.diameter, length=inputs.length, settings=arguments["settings"],
             curve=curve, with_cameras=not args.no_cameras)
-        result = read_result(output / f"{sequence.name}.cable.json")
-        bpy.ops.wm.read_homefile()  # each .blend starts as a reconstruct command's does
+        result = read_result(sequence_outputs(sequence, output)[0])
+        if started_with:  # each .blend starts as a reconstruct command's would
+            bpy.ops.wm.open_mainfile(filepath=started_with)
+        else:
+            bpy.ops.wm.read_homefile()
         apply_outcome(bpy.context, request, outcome_of_result(result, request))
         _save(blend)
     progress(1.0, "done")

@@ -13,8 +13,7 @@ import bpy
 import cv2
 
 from ..engine.errors import InputError, ReconstructionError
-from ..engine.io.colmap import natural_key
-from ..engine.io.image_sequence import IMAGE_SUFFIXES, read_image
+from ..engine.io.image_sequence import frame_files, read_image
 from ..engine.stages.mask_preview import mask_preview
 
 __all__ = ["PREVIEW_IMAGE", "frame_paths", "frame_image", "refresh_preview", "show_preview"]
@@ -34,8 +33,7 @@ def frame_paths(folder):
     folder = Path(bpy.path.abspath(folder)) if folder else None
     if folder is None or not folder.is_dir():
         return []
-    return sorted((p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES),
-                  key=lambda p: natural_key(p.name))
+    return frame_files(folder)
 
 
 def frame_image(settings, *, max_side=None):

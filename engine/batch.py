@@ -5,8 +5,10 @@ runs for one capture: a crash or a memory error in one leaves the others running
 stops them at once, and ``jobs`` of them run side by side to use the machine's cores. Every
 sequence is given the same settings, through a run file written in the output folder
 (``reconstruct --settings``). A batch can be run again: a sequence whose result is there,
-made with the same settings and inputs, is skipped; a failed one is tried again; a result
-made with other settings is left alone (and named) unless ``overwrite``.
+made with the same settings and inputs (the result records its settings, colour and scale;
+the summary its cameras' and masks' folders), is skipped; a failed one is tried again; a
+result made otherwise, or that no summary row accounts for, is left alone (and named) unless
+``overwrite``.
 
 Output folder: ``<name>.cable.json`` per sequence (and ``<name>.obj`` when asked for),
 ``<name>.log`` (the run's messages: progress, warnings, the reason it failed), the run file
@@ -18,6 +20,7 @@ import json
 import logging
 import os
 import re
+import signal
 import subprocess
 import sys
 import time
@@ -28,10 +31,10 @@ from pathlib import Path
 from .errors import Cancelled, InputError
 from .io.colmap import natural_key
 from .io.files import check_writable, write_atomic
-from .io.image_sequence import IMAGE_SUFFIXES, VIDEO_SUFFIXES
+from .io.image_sequence import VIDEO_SUFFIXES, frame_files
 
 __all__ = ["BATCH_FORMAT", "RUN_FILE", "SUMMARY", "Sequence", "SequenceOutcome",
-           "find_sequences", "run_batch", "batch_exit_code", "summary_table"]
+           "find_sequences", "run_batch", "sequence_outputs", "batch_exit_code", "summary_table"]
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +48,12 @@ RESULT_SUFFIX = ".cable.json"
 _PROGRESS = re.compile(r"^\[[#.]*\]\s*(\d+)% ?(.*)$")
 #: How often the running processes are looked at, seconds.
 _POLL = 0.1
+#: How long a stopped run may take to clean up (its temporary files) before it is killed.
+_GRACE = 5.0
+#: What a summary row says of folders it cannot know (a result made outside this batch).
+_UNKNOWN = "(unknown)"
+#: The exit codes a run ends with (any other is a crash: counted as a bug, 4).
+_CODES = (0, 2, 3, 4, 130)
 
 
 @dataclass(frozen=True)
@@ -87,6 +96,9 @@ class SequenceOutcome:
         Of the result (0 without one).
     reason : str
         Why it failed (the run's one-line message), or what was left alone.
+    cameras, masks : str or None
+        The folder names its result was made with (``"(unknown)"`` for a result made
+        outside the batch): a later batch skips the sequence only when they are its own.
     """
 
     name: str
@@ -97,10 +109,8 @@ class SequenceOutcome:
     crossings: int = 0
     warnings: int = 0
     reason: str = ""
-
-
-def _has_frames(folder):
-    return any(p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES for p in folder.iterdir())
+    cameras: str = None
+    masks: str = None
 
 
 def find_sequences(folder):
@@ -127,13 +137,13 @@ def find_sequences(folder):
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"{folder} {'is not a folder' if folder.exists() else 'does not exist'}")
-    found = {}
+    found = {}  # by the name as a file system that ignores case sees it
     for entry in sorted(folder.iterdir(), key=lambda p: natural_key(p.name)):
         if entry.name.startswith("."):
             continue
         sequence = None
         if entry.is_dir():
-            images = next((f for f in (entry, entry / "images") if f.is_dir() and _has_frames(f)),
+            images = next((f for f in (entry, entry / "images") if f.is_dir() and frame_files(f)),
                           None)
             if images is not None:
                 sequence = Sequence(entry.name, images, entry)
@@ -141,11 +151,12 @@ def find_sequences(folder):
             sequence = Sequence(entry.stem, entry, entry.with_suffix(""))
         if sequence is None:
             continue
-        if sequence.name in found:
-            raise InputError(f"{found[sequence.name].images.name} and {entry.name} in {folder} "
+        key = sequence.name.casefold()
+        if key in found:
+            raise InputError(f"{found[key].images.name} and {entry.name} in {folder} "
                              f"would both be sequence {sequence.name!r}: rename one")
-        found[sequence.name] = sequence
-    if not found and _has_frames(folder):
+        found[key] = sequence
+    if not found and frame_files(folder):
         raise InputError(f"{folder} holds frames: it is one sequence ('reconstruct' takes it); "
                          "a batch takes the folder that holds the sequences")
     if not found:
@@ -161,7 +172,9 @@ def _engine_command():
     package_root = Path(__file__).resolve().parent
     paths = [str(package_root.parent), *(p for p in sys.path if p)]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(paths))
-    return [sys.executable, "-m", package_root.name], env
+    env["PYTHONIOENCODING"] = "utf-8"  # the log is read as UTF-8 on every system
+    # -P: the working folder is not searched first (a folder there named engine, or numpy)
+    return [sys.executable, "-P", "-m", package_root.name], env
 
 
 @dataclass(eq=False)
@@ -176,11 +189,15 @@ class _Child:
     fraction: float = 0.0
     stage: str = ""
     lines: list = field(default_factory=list)
+    pending: str = ""  # a line the run is still writing
+    inputs: tuple = (None, None)  # the cameras' and masks' folder names it was given
 
-    def read(self):
-        """Take in what the run wrote since the last look."""
-        text = self.reader.read()
-        for line in text.splitlines():
+    def read(self, *, ended=False):
+        """Take in the lines the run wrote since the last look (with ``ended``, its last one
+        too, whether or not it ends in a newline)."""
+        text = self.pending + self.reader.read()
+        complete, _, self.pending = text.rpartition("\n") if not ended else (text, "", "")
+        for line in complete.splitlines():
             match = _PROGRESS.match(line.strip())
             if match:
                 self.fraction, self.stage = int(match.group(1)) / 100.0, match.group(2)
@@ -188,8 +205,17 @@ class _Child:
                 self.lines.append(line.strip())
 
     def stop(self):
+        """Stop the run as Ctrl-C would (it removes its temporary files and exits 130), or
+        kill it after :data:`_GRACE` seconds."""
         if self.process.poll() is None:
-            self.process.kill()
+            if os.name == "posix":
+                self.process.send_signal(signal.SIGINT)
+            else:
+                self.process.terminate()
+            try:
+                self.process.wait(_GRACE)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
         self.process.wait()
         self.reader.close()
 
@@ -233,16 +259,16 @@ def run_batch(sequences, output, settings, inputs, *, cameras=None, masks=None, 
     if not sequences:
         raise InputError("no sequence to reconstruct")
     jobs = max(int(jobs or os.cpu_count() or 1), 1)
-    output = Path(output)
-    if output.exists() and not output.is_dir():
-        raise InputError(f"{output} is a file, not a folder")
+    output = Path(output).resolve()
+    earlier = _earlier_rows(output)
     check_writable(output, created=True)
     output.mkdir(parents=True, exist_ok=True)
     run_file = write_run(output / RUN_FILE, settings, inputs, overwrite=True)
-    record = json.loads(json.dumps(run_record(settings, inputs)))
+    record = run_record(settings, inputs)
     outcomes, waiting = {}, deque()
     for sequence in sequences:
-        done = None if overwrite else _finished(sequence, output, record, obj)
+        done = None if overwrite else _finished(sequence, output, (record, cameras, masks),
+                                                earlier.get(sequence.name), obj)
         if done is None:
             waiting.append(sequence)
         else:
@@ -252,12 +278,30 @@ def run_batch(sequences, output, settings, inputs, *, cameras=None, masks=None, 
     try:
         _run_all(waiting, output, options, jobs, outcomes, len(sequences), progress, cancel)
     finally:
-        ordered = [outcomes.get(s.name, SequenceOutcome(s.name, "cancelled", 130, reason="not "
-                                                        "started")) for s in sequences]
+        ordered = [outcomes.get(s.name) or SequenceOutcome(
+            s.name, "cancelled", 130, reason="not started", **_made_with(earlier.get(s.name)))
+            for s in sequences]
         write_atomic(output / SUMMARY, json.dumps(
             {"format": BATCH_FORMAT, "sequences": [asdict(o) for o in ordered]}, indent=1)
             + "\n", overwrite=True)
     return ordered
+
+
+def _earlier_rows(output):
+    """The rows of an earlier batch's summary in ``output``, by sequence name (none when
+    there is none); :class:`InputError` when ``output`` is not a folder a batch may write."""
+    if output.exists() and not output.is_dir():
+        raise InputError(f"{output} is a file, not a folder")
+    summary = output / SUMMARY
+    if not summary.exists():
+        return {}
+    try:
+        data = json.loads(summary.read_text(encoding="utf-8"))
+        assert data["format"] == BATCH_FORMAT
+        return {row["name"]: row for row in data["sequences"]}
+    except (OSError, ValueError, KeyError, TypeError, AssertionError):
+        raise InputError(f"{summary} is not a batch's summary: choose another output "
+                         "folder") from None
 
 
 def _run_all(waiting, output, options, jobs, outcomes, total, progress, cancel):
@@ -265,12 +309,6 @@ def _run_all(waiting, output, options, jobs, outcomes, total, progress, cancel):
     try:
         while waiting or running:
             if cancel is not None and cancel.is_set():
-                for child in running:
-                    child.stop()
-                    outcomes[child.sequence.name] = SequenceOutcome(
-                        child.sequence.name, "cancelled", 130,
-                        round(time.perf_counter() - child.started, 3), reason="cancelled")
-                running.clear()
                 raise Cancelled("the batch was cancelled")
             while waiting and len(running) < jobs:
                 running.append(_start(waiting.popleft(), output, options))
@@ -284,9 +322,13 @@ def _run_all(waiting, output, options, jobs, outcomes, total, progress, cancel):
                          _message(outcomes, running, total))
             if running:
                 time.sleep(_POLL)
+        if progress is not None:
+            progress(1.0, _message(outcomes, running, total))
     finally:
-        for child in running:  # an interrupt (Ctrl-C) or an error here: no orphan left
+        for child in running:  # a cancel, Ctrl-C or an error here: no run left behind
             child.stop()
+            outcomes[child.sequence.name] = _outcome(child, SequenceOutcome(
+                child.sequence.name, "cancelled", 130, _since(child), reason="cancelled"))
 
 
 def _message(outcomes, running, total):
@@ -297,42 +339,58 @@ def _message(outcomes, running, total):
     return "; ".join(parts)
 
 
-def _outputs(sequence, output):
+def sequence_outputs(sequence, output):
+    """The result file and the OBJ of ``sequence`` in the output folder ``output``."""
+    output = Path(output)
     return output / f"{sequence.name}{RESULT_SUFFIX}", output / f"{sequence.name}.obj"
 
 
-def _finished(sequence, output, record, obj):
+def _finished(sequence, output, wanted, earlier, obj):
     """The outcome of a sequence whose result is already there (None: run it): skipped when
-    made with ``record`` (its missing OBJ written from it), failed when made otherwise."""
+    made as ``wanted`` says (``(run record, cameras, masks)``: its settings, colour and scale
+    as the result records them, the folders the earlier batch's summary row names), its
+    missing OBJ then written from it; failed when made otherwise."""
     from .io.obj import write_obj
     from .io.result import read_result
 
-    result_path, obj_path = _outputs(sequence, output)
+    result_path, obj_path = sequence_outputs(sequence, output)
     if not result_path.exists():
         return None
+    record, cameras, masks = wanted
     try:
-        made = json.loads(result_path.read_text()).get("run")
         result = read_result(result_path)
-    except (OSError, ValueError, AttributeError):
-        made, result = None, None
-    if result is None or made != record:
+    except (OSError, ValueError):
+        result = None
+    made = None if result is None or earlier is None else (
+        result.run, earlier.get("cameras"), earlier.get("masks"))
+    if made != (json.loads(json.dumps(record)), cameras, masks):
         return SequenceOutcome(sequence.name, "failed", 2, reason=(
             f"{result_path.name} is there, made with other settings or inputs (or unreadable): "
-            "left alone (--overwrite replaces it)"))
+            "left alone (--overwrite replaces it)"), **_made_with(earlier))
     if obj and not obj_path.exists():
         write_obj(result, obj_path)
-    return _with_result(SequenceOutcome(sequence.name, "skipped", 0), result)
+    return _with_result(SequenceOutcome(sequence.name, "skipped", 0, cameras=cameras,
+                                        masks=masks), result)
+
+
+def _made_with(earlier):
+    """The cameras' and masks' folders a result there was made with, as the earlier summary
+    row says (:data:`_UNKNOWN` without one)."""
+    if earlier is None:
+        return {"cameras": _UNKNOWN, "masks": _UNKNOWN}
+    return {"cameras": earlier.get("cameras"), "masks": earlier.get("masks")}
 
 
 def _with_result(outcome, result):
     return SequenceOutcome(outcome.name, outcome.status, outcome.exit_code, outcome.seconds,
                            paths=len(result.paths), crossings=len(result.crossings),
-                           warnings=len(result.warnings), reason=outcome.reason)
+                           warnings=len(result.warnings), reason=outcome.reason,
+                           cameras=outcome.cameras, masks=outcome.masks)
 
 
 def _start(sequence, output, options):
     command, env = _engine_command()
-    result_path, obj_path = _outputs(sequence, output)
+    result_path, obj_path = sequence_outputs(sequence, output)
     command += ["reconstruct", str(sequence.images.resolve()), "-o", str(result_path),
                 "--settings", str(options["run_file"])]
     for flag, name in (("--cameras", options["cameras"]), ("--masks", options["masks"])):
@@ -344,29 +402,44 @@ def _start(sequence, output, options):
         command += ["--overwrite"]
     log_path = output / f"{sequence.name}.log"
     with open(log_path, "w", encoding="utf-8") as stream:  # the child keeps its own handle
+        # a session of its own (POSIX): a Ctrl-C in the terminal reaches the batch alone,
+        # which stops each run with one SIGINT (a second one could cut its clean-up short)
         process = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=stream,
-                                   stderr=subprocess.STDOUT, env=env)
+                                   stderr=subprocess.STDOUT, env=env,
+                                   start_new_session=os.name == "posix")
     return _Child(sequence, process, log_path, open(log_path, encoding="utf-8",
-                                                    errors="replace"), time.perf_counter())
+                                                    errors="replace"), time.perf_counter(),
+                  inputs=(options["cameras"], options["masks"]))
 
 
 def _ended(child, output):
     """The outcome of a run that has ended."""
     from .io.result import read_result
 
-    child.read()
+    child.read(ended=True)
     child.reader.close()
-    code, name = child.process.returncode, child.sequence.name
-    seconds = round(time.perf_counter() - child.started, 3)
+    code, name, seconds = child.process.returncode, child.sequence.name, _since(child)
     if code == 0:
-        return _with_result(SequenceOutcome(name, "done", 0, seconds),
-                            read_result(_outputs(child.sequence, output)[0]))
+        return _with_result(_outcome(child, SequenceOutcome(name, "done", 0, seconds)),
+                            read_result(sequence_outputs(child.sequence, output)[0]))
     if code < 0:  # killed: the system ran out of memory, or someone stopped it
-        return SequenceOutcome(name, "failed", 3, seconds,
-                               reason=f"the run was killed (signal {-code})")
-    reason = child.lines[-1] if child.lines else f"exit code {code}"
-    return SequenceOutcome(name, "cancelled" if code == 130 else "failed", code, seconds,
-                           reason=reason)
+        return _outcome(child, SequenceOutcome(name, "failed", 3, seconds,
+                                               reason=f"the run was killed (signal {-code})"))
+    reason = child.lines[-1] if child.lines else "no message"
+    if code not in _CODES:  # it crashed (or Python could not start it)
+        code, reason = 4, f"exit code {code}: {reason}"
+    return _outcome(child, SequenceOutcome(name, "cancelled" if code == 130 else "failed",
+                                           code, seconds, reason=reason))
+
+
+def _since(child):
+    return round(time.perf_counter() - child.started, 3)
+
+
+def _outcome(child, outcome):
+    """``outcome`` with the cameras' and masks' folder names ``child`` was given."""
+    cameras, masks = child.inputs
+    return SequenceOutcome(**{**asdict(outcome), "cameras": cameras, "masks": masks})
 
 
 def batch_exit_code(outcomes):

@@ -1,6 +1,7 @@
 """Many sequences: ``python -m engine batch`` and the add-on's ``batch`` command."""
 
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -73,7 +74,7 @@ def test_each_sequence_gets_its_result_and_a_failure_stops_no_other(sequences, t
     assert "no cable pixels" in (output / "grey.log").read_text()
     assert not (output / "grey.cable.json").exists()
     assert summary["alpha"]["paths"] == 1 and summary["alpha"]["crossings"] == 2
-    assert "alpha" in run.stderr and "done" in run.stderr  # the table
+    assert re.search(r"^sequence +status +seconds", run.stderr, re.M)  # the table
     # each as `reconstruct` makes it alone
     alone = reconstruct(sequences / "alpha" / "images", cameras=sequences / "alpha" / "sparse")
     batch = read_result(output / "alpha.cable.json")
@@ -82,17 +83,20 @@ def test_each_sequence_gets_its_result_and_a_failure_stops_no_other(sequences, t
     # again: the finished ones are skipped, the failed one is tried again
     made = {n: (output / f"{n}.cable.json").read_bytes() for n in ("alpha", "beta")}
     again = run_engine("-q", "batch", sequences, "-o", output, "--cameras", "sparse")
-    assert again.returncode == 3 and again.stderr == ""
+    assert again.returncode == 3  # -q: the failure alone is said
+    assert again.stderr.strip().splitlines() == [
+        f"grey: {summary['grey']['reason']}"]
     summary = rows(output)
     assert [summary[n]["status"] for n in ("alpha", "beta", "grey")] == ["skipped", "skipped",
                                                                            "failed"]
     assert summary["alpha"]["crossings"] == 2
-    # other settings: the results made with the first are left alone, and said so
-    other = run_engine("-q", "batch", sequences, "-o", output, "--cameras", "sparse",
-                       "--diameter", "8")
-    assert other.returncode == 3
-    assert "other settings" in rows(output)["alpha"]["reason"]
-    assert {n: (output / f"{n}.cable.json").read_bytes() for n in made} == made
+    # other settings, or other inputs: the results made before are left alone, and said so
+    for options, code in ((["--diameter", "8"], 3), (["--masks", "masks"], 2)):
+        other = run_engine("-q", "batch", sequences, "-o", output, "--cameras", "sparse",
+                           *options)
+        assert other.returncode == code  # with masks, the grey one has none: bad input
+        assert "other settings or inputs" in rows(output)["alpha"]["reason"]
+        assert {n: (output / f"{n}.cable.json").read_bytes() for n in made} == made
     # until asked to replace them
     replaced = run_engine("-q", "batch", sequences, "-o", output, "--cameras", "sparse",
                           "--diameter", "8", "--overwrite", "--obj")
@@ -113,6 +117,11 @@ def test_bad_batch_input_is_one_line(sequences, tmp_path):
     (tmp_path / "file").write_text("")
     run = run_engine("batch", sequences, "-o", tmp_path / "file")
     assert run.returncode == 2 and "is a file, not a folder" in run.stderr
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "summary.json").write_text("{}")  # someone else's
+    run = run_engine("batch", sequences, "-o", tmp_path / "mine")
+    assert run.returncode == 2 and "is not a batch's summary" in run.stderr
+    assert (tmp_path / "mine" / "summary.json").read_text() == "{}"
 
 
 def test_a_cancelled_batch_stops_its_runs_and_leaves_no_result(sequences, tmp_path):
@@ -129,9 +138,15 @@ def test_a_cancelled_batch_stops_its_runs_and_leaves_no_result(sequences, tmp_pa
     with pytest.raises(Cancelled):
         run_batch(found, output, PipelineSettings(), RunInputs(), cameras="sparse", jobs=2,
                   progress=progress, cancel=cancel)
-    assert cancel.is_set()
     assert not list(output.glob("*.cable.json"))
-    assert {row["status"] for row in rows(output).values()} == {"cancelled"}
+    summary = rows(output)
+    assert {row["status"] for row in summary.values()} == {"cancelled"}
+    assert summary["grey"]["reason"] == "not started"
+    # the two runs were stopped as Ctrl-C stops one: each said so and cleaned up
+    for name in ("alpha", "beta"):
+        assert summary[name]["reason"] == "cancelled"
+        assert (output / f"{name}.log").read_text().strip().endswith("cancelled")
+    assert not list(output.glob("*.tmp"))
 
 
 def test_blender_batch_writes_a_blend_per_sequence(addon, sequences, tmp_path, capsys):
@@ -156,3 +171,19 @@ def test_blender_batch_writes_a_blend_per_sequence(addon, sequences, tmp_path, c
         capsys.readouterr().err
     assert (output / "beta.blend").read_bytes() == before
     bpy.ops.wm.read_homefile(use_empty=True)
+
+
+def test_a_runs_lines_are_read_whole_however_its_log_is_cut():
+    from engine.batch import _Child
+
+    chunks = iter(["[###...] 10% mas", "ks\nwarning: a frame\nreconstruction fai",
+                   "led: no path", ""])
+    reader = type("Reader", (), {"read": lambda self: next(chunks)})()
+    child = _Child(sequence=None, process=None, log_path=None, reader=reader, started=0.0)
+    child.read()
+    assert child.lines == [] and child.fraction == 0.0  # half a progress line: not yet
+    child.read()
+    assert child.fraction == 0.1 and child.stage == "masks"
+    assert child.lines == ["warning: a frame"]
+    child.read(ended=True)  # the run ended: its last line counts without a newline
+    assert child.lines[-1] == "reconstruction failed: no path"

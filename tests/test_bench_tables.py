@@ -90,7 +90,7 @@ def test_a_profile_charges_each_engine_function_its_library_calls_but_not_its_ca
     thin = times["engine.stages.skeleton_2d.thin"]
     assert thin[1] == 5 and thin[0] > 0
     # each caller is charged its own work only: together they are the run, not more
-    assert 0.8 * elapsed < sum(seconds for seconds, _ in times.values()) <= 1.01 * elapsed
+    assert 0.8 * elapsed < sum(seconds for seconds, _ in times.values()) <= 1.05 * elapsed
     rows = top_functions([("true", times), ("true", times)], count=3)
     functions = [row for row in rows if row["function"] != "(all of the stage)"]
     assert len(functions) == 3 and functions[0]["scenes"] == "2/2"

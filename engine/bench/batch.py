@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..batch import find_sequences, run_batch
+from ..batch import find_sequences, run_batch, sequence_outputs
 from ..io.result import read_result
 from ..pipeline import PipelineSettings, RunInputs
 from ..synthetic.scene import SceneSpec, make_scene, write_scene
@@ -55,7 +55,7 @@ def bench_batch(*, sequences=4, views=30, jobs=None, progress=None):
             outcomes = run_batch(found, work / output, PipelineSettings(), RunInputs(),
                                  cameras="sparse", jobs=count, progress=progress)
             wall = time.perf_counter() - started
-            points = [read_result(work / output / f"{s.name}.cable.json").paths[0].points
+            points = [read_result(sequence_outputs(s, work / output)[0]).paths[0].points
                       for s in found]
             first = first or (wall, points)
             rows.append({

@@ -4,9 +4,10 @@ cProfile's *own time* of a function leaves out what the libraries it calls spend
 ``cv2.remap``, a numpy reduction, a SciPy factorisation are functions of their own), which is
 most of the time here. So each engine function is charged its *cumulative* time less that of
 the engine functions it calls: its own Python work and every library call it makes itself.
-Summed over the engine's functions this is the run's time (recursion aside; the time a
-thread waits for the others is left out, and threads working side by side each count), and
-each row names code we can change.
+Summed over the engine's functions this is the run's time (recursion aside; an engine
+function reached through library code, a generator expression ``sum`` drives, is taken off
+the engine functions that called that library code in the shares of its time), and each row
+names code we can change. The run must be on one thread: cProfile cannot tell threads apart.
 """
 
 import cProfile
@@ -16,6 +17,9 @@ from pathlib import Path
 __all__ = ["profiled", "engine_times", "top_functions", "PROFILE_COLUMNS"]
 
 PROFILE_COLUMNS = ("cameras", "function", "stage", "seconds", "share", "calls", "scenes")
+#: How many library calls up an engine function's time is followed to the engine function
+#: that reached it.
+_DEPTH = 8
 
 #: The stage a module's time is charged to (the first prefix that matches its path under
 #: engine/).
@@ -48,36 +52,44 @@ def _engine_label(key, root):
     return ".".join(relative.with_suffix("").parts) + f".{name}"
 
 
-def _waits(key):
-    """Whether a pstats key is a thread's wait for another (a lock, a queue, a join)."""
-    filename, _, name = key
-    return filename == "~" and any(word in name for word in ("acquire", "join", "Queue",
-                                                             "wait"))
-
-
 def engine_times(stats):
     """Per engine function: ``{"module.function": (seconds, calls)}``, the seconds its own
-    work and its library calls took (its cumulative time less its engine callees' and its
-    waits for other threads: the carving's worker threads are profiled too, and their work
-    is charged to the functions they run)."""
+    work and its library calls took (its cumulative time less its engine callees', also
+    those it reached through library code: a generator expression ``sum`` drives, a sort
+    key).
+
+    The run must be on one thread: cProfile cannot tell threads' calls apart.
+    """
     root = Path(__file__).resolve().parents[2]
     raw = stats.stats
     labels = {key: _engine_label(key, root) for key in raw}
-    times = {}
-    for key, (_, calls, _, cumulative, _) in raw.items():
-        if labels[key] is not None:
-            times[key] = [cumulative, calls]
-    for key, (_, _, _, _, callers) in raw.items():
-        if labels[key] is None and not _waits(key):
-            continue
-        for caller, (_, _, _, cumulative) in callers.items():
-            if caller in times and caller != key:
-                times[caller][0] -= cumulative
+    times = {key: [cumulative, calls] for key, (_, calls, _, cumulative, _) in raw.items()
+             if labels[key] is not None}
+    for key in times:
+        for caller, (_, _, _, cumulative) in raw[key][4].items():
+            if caller != key:
+                _charge_up(raw, times, caller, cumulative)
     merged = {}
     for key, (seconds, calls) in times.items():
         seconds_before, calls_before = merged.get(labels[key], (0.0, 0))
         merged[labels[key]] = (seconds_before + max(seconds, 0.0), calls_before + calls)
     return merged
+
+
+def _charge_up(raw, times, caller, seconds, depth=0):
+    """Take ``seconds`` (an engine function's time) off the engine function that called it:
+    ``caller``, or through library code (each library function's callers share the amount
+    as they share that function's time), up to :data:`_DEPTH` calls up."""
+    if caller in times:
+        times[caller][0] -= seconds
+        return
+    if depth >= _DEPTH or caller not in raw:
+        return
+    callers = raw[caller][4]
+    total = sum(cumulative for _, _, _, cumulative in callers.values())
+    for up, (_, _, _, cumulative) in callers.items():
+        if up != caller and total > 0:
+            _charge_up(raw, times, up, seconds * cumulative / total, depth + 1)
 
 
 def _stage(label):

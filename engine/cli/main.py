@@ -342,6 +342,10 @@ def _run_batch(args):
     outcomes = run_batch(**arguments, obj=args.obj,
                          progress=None if args.quiet else ProgressBar())
     log.info("%s", summary_table(outcomes))
+    if args.quiet:  # the table is not printed: the failures are errors
+        for outcome in outcomes:
+            if outcome.status == "failed":
+                log.error("%s: %s", outcome.name, outcome.reason)
     return batch_exit_code(outcomes)
 
 

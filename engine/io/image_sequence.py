@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import InputError
 from .colmap import natural_key
 
-__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "IMREAD_FRAME", "ImageSequence",
+__all__ = ["IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "IMREAD_FRAME", "ImageSequence", "frame_files",
            "open_image_sequence", "read_image"]
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
@@ -153,6 +153,14 @@ def _extract_video(video, frames, work_dir):
     return paths
 
 
+def frame_files(folder):
+    """The .jpg/.png files in ``folder``, in natural order (``frame2`` before ``frame10``;
+    their contents unchecked)."""
+    return sorted((p for p in Path(folder).iterdir()
+                   if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
+                  key=lambda p: natural_key(p.name))
+
+
 def open_image_sequence(source, *, video_frames=40, work_dir=None):
     """Open a folder of frames (natural order) or a video (sampled evenly) and check it.
 
@@ -189,9 +197,7 @@ def open_image_sequence(source, *, video_frames=40, work_dir=None):
                 shutil.rmtree(extracted, ignore_errors=True)
             raise
     elif source.is_dir():
-        paths = sorted((p for p in source.iterdir()
-                        if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES),
-                       key=lambda p: natural_key(p.name))
+        paths = frame_files(source)
         if not paths:
             raise InputError(f"{source} holds no .jpg or .png images")
     elif source.exists():
