@@ -25,13 +25,14 @@ import subprocess
 import sys
 import time
 from collections import deque
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from .errors import Cancelled, InputError
 from .io.colmap import natural_key
 from .io.files import check_writable, write_atomic
 from .io.image_sequence import VIDEO_SUFFIXES, frame_files
+from .threads import MOST_THREADS, cpu_count
 
 __all__ = ["BATCH_FORMAT", "RUN_FILE", "SUMMARY", "Sequence", "SequenceOutcome",
            "find_sequences", "run_batch", "sequence_outputs", "batch_exit_code", "summary_table"]
@@ -231,6 +232,9 @@ def run_batch(sequences, output, settings, inputs, *, cameras=None, masks=None, 
     output : str or os.PathLike
         The output folder (made if missing).
     settings : PipelineSettings
+        Its ``workers`` of 0 gives each run its share of the cores (the cores over ``jobs``,
+        at least 1); the results are the same on any number, and a result made with other
+        ``workers`` still counts as made with these settings.
     inputs : RunInputs
         The colour and scale every sequence is given.
     cameras, masks : str, optional
@@ -258,7 +262,9 @@ def run_batch(sequences, output, settings, inputs, *, cameras=None, masks=None, 
 
     if not sequences:
         raise InputError("no sequence to reconstruct")
-    jobs = max(int(jobs or os.cpu_count() or 1), 1)
+    jobs = max(int(jobs or cpu_count()), 1)
+    if not settings.workers:  # the cores shared out to the runs side by side
+        settings = replace(settings, workers=max(min(cpu_count() // jobs, MOST_THREADS), 1))
     output = Path(output).resolve()
     earlier = _earlier_rows(output)
     check_writable(output, created=True)
@@ -362,8 +368,8 @@ def _finished(sequence, output, wanted, earlier, obj):
     except (OSError, ValueError):
         result = None
     made = None if result is None or earlier is None else (
-        result.run, earlier.get("cameras"), earlier.get("masks"))
-    if made != (json.loads(json.dumps(record)), cameras, masks):
+        _without_workers(result.run), earlier.get("cameras"), earlier.get("masks"))
+    if made != (_without_workers(json.loads(json.dumps(record))), cameras, masks):
         return SequenceOutcome(sequence.name, "failed", 2, reason=(
             f"{result_path.name} is there, made with other settings or inputs (or unreadable): "
             "left alone (--overwrite replaces it)"), **_made_with(earlier))
@@ -371,6 +377,15 @@ def _finished(sequence, output, wanted, earlier, obj):
         write_obj(result, obj_path)
     return _with_result(SequenceOutcome(sequence.name, "skipped", 0, cameras=cameras,
                                         masks=masks), result)
+
+
+def _without_workers(record):
+    """A run record without its ``workers`` (the result is the same on any number of
+    threads, and a batch gives each run its share of the cores)."""
+    if not isinstance(record, dict) or not isinstance(record.get("settings"), dict):
+        return record
+    settings = {key: value for key, value in record["settings"].items() if key != "workers"}
+    return {**record, "settings": settings}
 
 
 def _made_with(earlier):

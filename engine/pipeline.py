@@ -18,6 +18,7 @@ Stages, each timed in the result (the README's data flow)::
 
 import json
 import logging
+import threading
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -25,7 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .errors import InputError, ReconstructionError
+from .errors import Cancelled, InputError, ReconstructionError
 from .geometry.similarity import Similarity
 from .geometry.upright import UprightSettings, make_upright
 from .io.colmap import read_colmap_model
@@ -33,7 +34,7 @@ from .io.files import write_atomic
 from .io.image_sequence import open_image_sequence, read_image
 from .io.packed_mask import PackedMask, unpacked
 from .io.result import CablePath, Crossing, Result, StrandRef
-from .progress import StageProgress, check_cancel
+from .progress import AnySet, StageProgress, check_cancel
 from .settings import check_settings, setting, settings_from_dict, settings_to_dict
 from .stages.cameras import CameraEstimationSettings, estimate_cameras
 from .stages.carving import CarvingSettings, carve
@@ -44,10 +45,11 @@ from .stages.segment_graph import SegmentGraphSettings, extract_segment_graph_fr
 from .stages.segmentation import (ColourRange, SegmentationSettings, cable_width, junction_map,
                                   reference_frames, segment_frame, sequence_colour)
 from .stages.topology import TopologySettings, resolve_topology
+from .threads import map_in_order, thread_count, worker_pool
 
 __all__ = ["PipelineSettings", "RunInputs", "View", "Reconstruction", "reconstruct",
            "run_reconstruction", "read_run", "write_run", "run_record", "RUN_FORMAT",
-           "measure_radius", "read_masks", "cable_colour",
+           "measure_radius", "read_masks", "cable_colour", "segment_frames",
            "path_colours", "sequence_cameras"]
 
 log = logging.getLogger(__name__)
@@ -83,6 +85,13 @@ class PipelineSettings:
         When the run warns that its masks held more than the cable.
     reference_frame : int
         Frame the automatic cable colour is taken from.
+    workers : int
+        Threads for the work done frame by frame and view by view (the masks, their agreement
+        across views, the topology's and the fit's reading of the views, the radius) and for
+        making the masks while pycolmap estimates the cameras (0: one per CPU, at most
+        :data:`~engine.threads.MOST_THREADS`; 1: all of it in turn on the calling thread).
+        The result is the same on any number; each thread holds a frame's arrays. The carving
+        has its own (``carving.threads``).
     """
 
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
@@ -95,6 +104,7 @@ class PipelineSettings:
     upright: UprightSettings = field(default_factory=UprightSettings)
     checks: MaskCheckSettings = field(default_factory=MaskCheckSettings)
     reference_frame: int = setting(0, low=0)
+    workers: int = setting(0, low=0)
 
     def __post_init__(self):
         check_settings(self)
@@ -197,7 +207,7 @@ def read_masks(folder, names, width, height, *, packed=False):
     return masks, None
 
 
-def measure_radius(points, views, *, junction_margin=1.0):
+def measure_radius(points, views, *, junction_margin=1.0, workers=1):
     """The cable's radius from its width in the images, along a fitted centreline.
 
     In every view, each centreline point that projects inside the frame, on the cable and away
@@ -213,6 +223,8 @@ def measure_radius(points, views, *, junction_margin=1.0):
     views : sequence of View
     junction_margin : float, optional
         Points within this many cable widths of a junction pixel are left out.
+    workers : int, optional
+        Threads reading the views (0: one per CPU); the radius is the same on any number.
 
     Returns
     -------
@@ -223,43 +235,9 @@ def measure_radius(points, views, *, junction_margin=1.0):
     tangents = np.concatenate([np.gradient(line, axis=0) if len(line) > 1
                                else np.zeros_like(line) for line in lines])
     points = np.concatenate(lines)
-    samples = []
-    for view in views:
-        camera, mask = view.camera, unpacked(view.mask)
-        if not mask.any():
-            continue
-        width = cable_width(mask)
-        grow = max(int(round(junction_margin * width)), 1)
-        near_junction = cv2.dilate(unpacked(view.junctions).view(np.uint8),
-                                   np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)) > 0
-        pixels, depth = camera.project(points)
-        ahead, _ = camera.project(points + tangents)
-        with np.errstate(invalid="ignore"):
-            col, row = np.floor(pixels[:, 0]), np.floor(pixels[:, 1])
-            inside = ((depth > 0) & (col >= 0) & (row >= 0) & (col < camera.width)
-                      & (row < camera.height))
-        rows, cols = row[inside].astype(int), col[inside].astype(int)
-        usable = np.flatnonzero(inside)[mask[rows, cols] & ~near_junction[rows, cols]]
-        along = ahead[usable] - pixels[usable]
-        length = np.linalg.norm(along, axis=1)
-        usable, along = usable[length > 1e-9], along[length > 1e-9] / length[length > 1e-9,
-                                                                             None]
-        if not len(usable):
-            continue
-        normal = np.column_stack([-along[:, 1], along[:, 0]])
-        steps = np.arange(-int(np.ceil(20 * width)), int(np.ceil(20 * width)) + 1) * 0.1
-        trace = pixels[usable, None, :] + steps[None, :, None] * normal[:, None, :]
-        c, r = np.floor(trace[..., 0]).astype(int), np.floor(trace[..., 1]).astype(int)
-        on_frame = (c >= 0) & (r >= 0) & (c < camera.width) & (r < camera.height)
-        on = np.zeros(c.shape, dtype=bool)
-        on[on_frame] = mask[r[on_frame], c[on_frame]]
-        middle = len(steps) // 2
-        # the run through the point: the first sample off the cable on either side
-        after = np.argmin(on[:, middle:], axis=1)
-        before = np.argmin(on[:, middle::-1], axis=1)
-        closed = (after > 0) & (before > 0)  # the run ends within the samples on both sides
-        run = 0.1 * (after + before - 1)
-        samples.append(0.5 * run[closed] * depth[usable][closed] / np.mean(camera.focal))
+    with worker_pool(workers, "radius") as pool:
+        samples = map_in_order(
+            pool, lambda view: _half_widths(view, points, tangents, junction_margin), views)
     samples = np.concatenate(samples) if samples else np.zeros(0)
     if not len(samples):
         return None
@@ -267,6 +245,45 @@ def measure_radius(points, views, *, junction_margin=1.0):
     # on the pixel grid, so a median would be off by up to half a pixel
     low, high = np.percentile(samples, [25.0, 75.0])
     return float(np.mean(samples[(samples >= low) & (samples <= high)]))
+
+
+def _half_widths(view, points, tangents, junction_margin):
+    """:func:`measure_radius`'s samples of one view (world units; none for a view without
+    cable)."""
+    camera, mask = view.camera, unpacked(view.mask)
+    if not mask.any():
+        return np.zeros(0)
+    width = cable_width(mask)
+    grow = max(int(round(junction_margin * width)), 1)
+    near_junction = cv2.dilate(unpacked(view.junctions).view(np.uint8),
+                               np.ones((2 * grow + 1, 2 * grow + 1), np.uint8)) > 0
+    pixels, depth = camera.project(points)
+    ahead, _ = camera.project(points + tangents)
+    with np.errstate(invalid="ignore"):
+        col, row = np.floor(pixels[:, 0]), np.floor(pixels[:, 1])
+        inside = ((depth > 0) & (col >= 0) & (row >= 0) & (col < camera.width)
+                  & (row < camera.height))
+    rows, cols = row[inside].astype(int), col[inside].astype(int)
+    usable = np.flatnonzero(inside)[mask[rows, cols] & ~near_junction[rows, cols]]
+    along = ahead[usable] - pixels[usable]
+    length = np.linalg.norm(along, axis=1)
+    usable, along = usable[length > 1e-9], along[length > 1e-9] / length[length > 1e-9, None]
+    if not len(usable):
+        return np.zeros(0)
+    normal = np.column_stack([-along[:, 1], along[:, 0]])
+    steps = np.arange(-int(np.ceil(20 * width)), int(np.ceil(20 * width)) + 1) * 0.1
+    trace = pixels[usable, None, :] + steps[None, :, None] * normal[:, None, :]
+    c, r = np.floor(trace[..., 0]).astype(int), np.floor(trace[..., 1]).astype(int)
+    on_frame = (c >= 0) & (r >= 0) & (c < camera.width) & (r < camera.height)
+    on = np.zeros(c.shape, dtype=bool)
+    on[on_frame] = mask[r[on_frame], c[on_frame]]
+    middle = len(steps) // 2
+    # the run through the point: the first sample off the cable on either side
+    after = np.argmin(on[:, middle:], axis=1)
+    before = np.argmin(on[:, middle::-1], axis=1)
+    closed = (after > 0) & (before > 0)  # the run ends within the samples on both sides
+    run = 0.1 * (after + before - 1)
+    return 0.5 * run[closed] * depth[usable][closed] / np.mean(camera.focal)
 
 
 class _Clock:
@@ -279,31 +296,86 @@ class _Clock:
         for name in stages:
             self.slices[name] = (start / total, (start + _STAGES[name]) / total)
             start += _STAGES[name]
-        self.timings = {}
+        self.timings, self.started, self.current = {}, {}, None
 
     def stage(self, name):
         check_cancel(self.cancel, "the reconstruction")
-        self.current, self.started = name, time.perf_counter()
+        self.current, self.started[name] = name, time.perf_counter()
         return self.progress.part(*self.slices[name])
 
-    def done(self):
-        self.timings[self.current] = round(time.perf_counter() - self.started, 3)
+    def side_by_side(self, names):
+        """Start the stages ``names``, to run at once on different threads: a progress for
+        each, moving the bar over their slices by the share of all their work done."""
+        check_cancel(self.cancel, "the reconstruction")
+        now = time.perf_counter()
+        self.started.update((name, now) for name in names)
+        self.timings.update((name, 0.0) for name in names)  # in the stages' order
+        shares = {name: 0.0 for name in names}
+        start = min(self.slices[name][0] for name in names)
+        lock = threading.Lock()
+
+        def progress_of(name):
+            low, high = self.slices[name]
+
+            def progress(fraction, message):
+                with lock:  # one thread at a time reports, each its own share
+                    shares[name] = (high - low) * min(max(fraction, 0.0), 1.0)
+                    self.progress(start + sum(shares.values()), message)
+            return StageProgress(progress)
+
+        return {name: progress_of(name) for name in names}
+
+    def done(self, name=None):
+        name = self.current if name is None else name
+        self.timings[name] = round(time.perf_counter() - self.started[name], 3)
 
 
 def _segment(sequence, colour, settings, stage, cancel):
+    check_cancel(cancel, "segmenting")
     reference = min(settings.reference_frame, len(sequence) - 1)
     frames = reference_frames(len(sequence), reference, settings.segmentation.model_frames)
     colour, model = sequence_colour([sequence.read(k) for k in frames], colour,
                                     settings.segmentation)
-    masks, junctions = [], []
-    for number in range(len(sequence)):
-        check_cancel(cancel, "the reconstruction")
+    masks, junctions, _ = segment_frames(sequence, colour, model, settings, progress=stage,
+                                         cancel=cancel)
+    return colour, masks, junctions
+
+
+def segment_frames(sequence, colour, model, settings, *, progress=None, cancel=None):
+    """Every frame of a sequence segmented (on ``settings.workers`` threads).
+
+    Parameters
+    ----------
+    sequence : ImageSequence
+    colour : ColourRange
+    model : ColourModel or None
+        The sequence's colour model (:func:`~engine.stages.segmentation.sequence_colour`).
+    settings : PipelineSettings
+    progress : callable, optional
+        ``progress(fraction, message)``, on the calling thread, after each frame in order.
+    cancel : threading.Event, optional
+
+    Returns
+    -------
+    masks, junctions : list of PackedMask
+        Each frame's mask and junction map.
+    widths : list of float
+        Each frame's cable width in pixels.
+    """
+    def segmented(number):
+        check_cancel(cancel, "segmenting")
         segmentation = segment_frame(sequence.read(number), colour, settings.segmentation,
                                      model=model)
-        masks.append(PackedMask(segmentation.mask))
-        junctions.append(PackedMask(segmentation.junctions))
-        stage((number + 1) / len(sequence), "masks")
-    return colour, masks, junctions
+        return (PackedMask(segmentation.mask), PackedMask(segmentation.junctions),
+                segmentation.width)
+
+    def done(number):
+        if progress is not None:
+            progress((number + 1) / len(sequence), f"masks: {sequence.names[number]}")
+
+    with worker_pool(settings.workers, "masks") as pool:
+        frames = map_in_order(pool, segmented, range(len(sequence)), done)
+    return [list(column) for column in zip(*frames)] if frames else [[], [], []]
 
 
 def _cameras(sequence, cameras, settings, stage, cancel):
@@ -693,18 +765,23 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         "carving", "graph", "topology", "fit"]
     clock = _Clock(progress, cancel, stages)
     with open_image_sequence(images) as sequence:
-        colour, frame_masks, frame_junctions = _frame_masks(sequence, masks, colour, settings,
-                                                            clock, cancel)
-        views, frame_masks, up, warnings = _views(sequence, cameras, frame_masks,
+        (colour, frame_masks, frame_junctions), found = _masks_and_cameras(
+            sequence, masks, colour, cameras, settings, clock, cancel)
+        views, frame_masks, up, warnings = _views(sequence, found, frame_masks,
                                                   frame_junctions, agree, settings, clock,
                                                   cancel)
         grid, topology, warnings, thickness = _carve_and_resolve(views, up, clock, settings,
                                                                  cancel, warnings)
         colour_seen, colours = _colours_seen(sequence, frame_masks, views, topology, settings)
     stage = clock.stage("fit")
-    evidence = [ImageEvidence.from_mask(view.camera, unpacked(view.mask),
-                                        unpacked(view.junctions), settings=settings.fit)
-                for view in views]
+
+    def read_view(view):
+        check_cancel(cancel, "the reconstruction")
+        return ImageEvidence.from_mask(view.camera, unpacked(view.mask),
+                                       unpacked(view.junctions), settings=settings.fit)
+
+    with worker_pool(settings.workers, "evidence") as pool:
+        evidence = map_in_order(pool, read_view, views)
     voxels = Voxels.from_grid(grid, agreement=settings.carving.core_agreement)
     state = Reconstruction(
         result=None, views=tuple(views), topology=topology, evidence=tuple(evidence),
@@ -724,34 +801,80 @@ def _check_scale(diameter, length):
             raise InputError(f"the {name} must be a positive number")
 
 
-def _frame_masks(sequence, masks, colour, settings, clock, cancel):
-    """The "masks" stage: ``(colour, masks, junctions)`` of every frame, read from the folder
-    ``masks`` or segmented (the colour found if None)."""
-    stage = clock.stage("masks")
+def _masks_and_cameras(sequence, masks, colour, cameras, settings, clock, cancel):
+    """The "masks" and "cameras" stages: ``(colour, masks, junctions)`` of every frame and
+    ``(cameras, up, warnings)``.
+
+    pycolmap matches and maps on one thread (see ``CameraEstimationSettings.deterministic``),
+    so while it estimates the cameras the masks are made on a thread of their own (when
+    ``settings.workers`` gives more than one thread). Either's failure stops the other. The
+    error raised is the masks' (as when they are made first), unless they were only stopped
+    because the cameras failed: then it is the cameras'.
+    """
+    if cameras is not None or thread_count(settings.workers) < 2:
+        made = _frame_masks(sequence, masks, colour, settings, clock.stage("masks"), cancel)
+        clock.done()
+        found = _cameras(sequence, cameras, settings, clock.stage("cameras"), cancel)
+        clock.done()
+        return made, found
+    progress = clock.side_by_side(("masks", "cameras"))
+    failed = threading.Event()
+    stop = AnySet(cancel, failed)
+    outcome = {}
+
+    def make_masks():
+        try:
+            outcome["made"] = _frame_masks(sequence, masks, colour, settings,
+                                           progress["masks"], stop)
+        except BaseException as error:  # noqa: BLE001 - raised on the calling thread
+            outcome["error"] = error
+            failed.set()
+        finally:
+            clock.done("masks")
+
+    worker = threading.Thread(target=make_masks, name="masks", daemon=True)
+    worker.start()
+    try:
+        found = _cameras(sequence, None, settings, progress["cameras"], stop)
+        clock.done("cameras")
+        worker.join()
+    except BaseException:  # the cameras failed (or Ctrl-C): stop the masks, then say why
+        failed.set()
+        worker.join()
+        error = outcome.get("error")
+        if error is not None and not isinstance(error, Cancelled):
+            raise error from None
+        raise
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["made"], found
+
+
+def _frame_masks(sequence, masks, colour, settings, stage, cancel):
+    """``(colour, masks, junctions)`` of every frame, read from the folder ``masks`` or
+    segmented (the colour found if None)."""
     if masks is not None:
         frame_masks, frame_junctions = read_masks(masks, sequence.names, sequence.width,
                                                   sequence.height, packed=True)
         if frame_junctions is None:
-            frame_junctions = [_junctions_of(mask(), settings.segmentation)
-                               for mask in frame_masks]
+            with worker_pool(settings.workers, "junctions") as pool:
+                frame_junctions = map_in_order(
+                    pool, lambda mask: _junctions_of(mask(), settings.segmentation), frame_masks)
         stage(1.0, "masks")
     else:
         colour, frame_masks, frame_junctions = _segment(sequence, colour, settings, stage,
                                                         cancel)
-    clock.done()
     if not any(mask.any() for mask in frame_masks):
         raise ReconstructionError("no cable pixels in any frame: check the cable colour "
                                   "(python -m engine segment shows the masks)")
     return colour, frame_masks, frame_junctions
 
 
-def _views(sequence, cameras, frame_masks, frame_junctions, agree, settings, clock, cancel):
-    """The "cameras" and "agreement" stages: ``(views, frame_masks, up, warnings)``, the
-    frames' masks as agreed across the views."""
+def _views(sequence, found, frame_masks, frame_junctions, agree, settings, clock, cancel):
+    """The views of the ``found`` cameras (:func:`_cameras`) and the "agreement" stage:
+    ``(views, frame_masks, up, warnings)``, the frames' masks as agreed across the views."""
     empty = [name for name, mask in zip(sequence.names, frame_masks) if not mask.any()]
-    stage = clock.stage("cameras")
-    frame_cameras, up, warnings = _cameras(sequence, cameras, settings, stage, cancel)
-    clock.done()
+    frame_cameras, up, warnings = found
     if empty:
         warnings.append(f"no cable pixels in {len(empty)} frame(s): {', '.join(empty)}")
     if len(frame_cameras) < _FEW_VIEWS:
@@ -800,7 +923,7 @@ def _agree(views, settings, stage, cancel):
                                 junctions=[view.junctions for view in views],
                                 carving=settings.carving, settings=settings.agreement,
                                 segmentation=settings.segmentation, progress=stage,
-                                cancel=cancel, packed=True)
+                                cancel=cancel, packed=True, workers=settings.workers)
     log.info(report.summary())
     views = [replace(view, mask=mask, junctions=junctions)
              for view, mask, junctions in zip(views, masks, report.junctions)]
@@ -841,7 +964,8 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
     warnings = mask_warnings(thickness=thickness, settings=settings.checks) + list(warnings)
     stage = clock.stage("topology")
     topology = resolve_topology(graph, views, radius=grid.radius, up=up,
-                                settings=settings.topology, progress=stage, cancel=cancel)
+                                settings=settings.topology, progress=stage, cancel=cancel,
+                                workers=settings.workers)
     clock.done()
     return grid, topology, list(warnings) + list(topology.warnings), thickness
 
@@ -854,7 +978,8 @@ def _finish(fits, crossings, state, clock):
         if not fit.converged:
             warnings.append(f"{named}the final fit stopped before it converged: the curve may "
                             "be a little off the cable")
-    radius = measure_radius([fit.points for fit in fits], state.views)
+    radius = measure_radius([fit.points for fit in fits], state.views,
+                            workers=state.settings.workers)
     if not radius:
         radius = state.carved_radius
         warnings.append("the cable's radius could not be measured in the frames: it is the "

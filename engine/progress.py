@@ -7,7 +7,7 @@ cancel makes the stage raise :class:`~engine.errors.Cancelled` at its next check
 
 from .errors import Cancelled
 
-__all__ = ["StageProgress", "check_cancel"]
+__all__ = ["StageProgress", "AnySet", "check_cancel"]
 
 
 class StageProgress:
@@ -25,6 +25,17 @@ class StageProgress:
         """The slice ``start..stop`` of this stage's own 0..1, as a progress of its own."""
         span = self.stop - self.start
         return StageProgress(self.progress, self.start + span * start, self.start + span * stop)
+
+
+class AnySet:
+    """A cancel that is set when any of ``events`` is (those that are None left out): the
+    user's cancel, or a sibling's failure that makes the work pointless."""
+
+    def __init__(self, *events):
+        self.events = tuple(event for event in events if event is not None)
+
+    def is_set(self):
+        return any(event.is_set() for event in self.events)
 
 
 def check_cancel(cancel, what):

@@ -17,6 +17,7 @@ from engine import Cancelled, InputError, read_result
 from engine.batch import SUMMARY, find_sequences, run_batch
 from engine.pipeline import PipelineSettings, RunInputs, reconstruct
 from engine.synthetic.scene import SceneSpec, make_scene, write_scene
+from engine.threads import MOST_THREADS, cpu_count
 
 
 @pytest.fixture(scope="module")
@@ -79,10 +80,14 @@ def test_each_sequence_gets_its_result_and_a_failure_stops_no_other(sequences, t
     alone = reconstruct(sequences / "alpha" / "images", cameras=sequences / "alpha" / "sparse")
     batch = read_result(output / "alpha.cable.json")
     assert np.array_equal(batch.paths[0].points, alone.paths[0].points)
+    # two runs side by side share the cores out
+    assert batch.run["settings"]["workers"] == max(min(cpu_count() // 2, MOST_THREADS), 1)
 
-    # again: the finished ones are skipped, the failed one is tried again
+    # again (one run at a time, so with other workers): the finished ones are skipped, the
+    # failed one is tried again
     made = {n: (output / f"{n}.cable.json").read_bytes() for n in ("alpha", "beta")}
-    again = run_engine("-q", "batch", sequences, "-o", output, "--cameras", "sparse")
+    again = run_engine("-q", "batch", sequences, "-o", output, "--cameras", "sparse",
+                       "--jobs", "1")
     assert again.returncode == 3  # -q: the failure alone is said
     assert again.stderr.strip().splitlines() == [
         f"grey: {summary['grey']['reason']}"]

@@ -9,7 +9,7 @@ import pytest
 from engine.bench.looks import naive_mask
 from engine.errors import ReconstructionError
 from engine.io.image_sequence import read_image
-from engine.stages.colour_model import _SPACES, ColourModel, find_cable, thin_pieces
+from engine.stages.colour_model import _SPACES, ColourModel, _nearest, find_cable, thin_pieces
 from engine.stages.segmentation import reference_frames, segment_frame, sequence_colour
 from engine.synthetic.scene import look_scene
 
@@ -29,6 +29,20 @@ def test_thin_pieces_tell_a_cable_from_a_box():
     assert thin[line] and not thin[box]
     # the ridge's distance to the outside is half the width plus half a pixel
     assert 6.0 <= 2 * half_width[line] <= 10.0  # a 7 px line
+
+
+def test_each_pixel_goes_to_its_nearest_centre_and_the_first_of_equals():
+    rng = np.random.default_rng(4)
+    lab = rng.uniform([0, -60, -60], [100, 60, 60], (37, 23, 3)).astype(np.float32)
+    centres = rng.uniform([0, -60, -60], [100, 60, 60], (7, 3)).astype(np.float32)
+    lab[0, :3] = centres[2]  # on a centre
+    centres[5] = centres[1]  # two equal centres: the first wins
+    lab[1, :3] = centres[1]
+    distances = ((lab[:, :, None, :] - centres[None, None]) ** 2).sum(axis=3)
+    expected = np.argmin(distances, axis=2)  # argmin takes the first of equals
+    nearest = _nearest(lab, centres)
+    np.testing.assert_array_equal(nearest, expected)
+    assert (nearest[0, :3] == 2).all() and (nearest[1, :3] == 1).all() and not (nearest == 5).any()
 
 
 def test_the_model_looks_colours_up_as_its_histograms_say():

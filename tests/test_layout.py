@@ -18,8 +18,10 @@ BLENDER_MODULES = {"bpy", "bpy_extras", "mathutils", "bmesh", "gpu", "blf", "add
 #: Developer code: never imported by the runtime, never in the extension's zip.
 DEVELOPER = ("engine.synthetic", "engine.evaluation", "engine.bench")
 #: The runtime's packages in the data flow's order: a module imports only from its own rank or
-#: an earlier one (errors, progress and settings are what every rank reports and is tuned with).
+#: an earlier one (errors, progress and settings are what every rank reports and is tuned with;
+#: threads are how every rank spreads its work over the cores).
 RANKS = {"engine.errors": 0, "engine.progress": 0, "engine.settings": 0, "engine.__version__": 0,
+         "engine.threads": 0,
          "engine.geometry": 1, "engine.io": 2,
          "engine.stages": 3, "engine.pipeline": 4, "engine.batch": 4, "engine.cli": 5,
          "engine": 6,

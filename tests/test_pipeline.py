@@ -4,17 +4,20 @@ import shutil
 import subprocess
 import sys
 import threading
+import time
 
 import cv2
 import numpy as np
 import pytest
 
 from conftest import ROOT
-from engine import Cancelled, InputError, read_result
+from engine import Cancelled, InputError, ReconstructionError, read_result
 from engine.evaluation.metrics import evaluate
 from engine.io.obj import tube_mesh, write_obj
 from engine.io.overlay import draw_overlay
-from engine.pipeline import reconstruct, run_reconstruction
+from engine import pipeline
+from engine.pipeline import PipelineSettings, reconstruct, run_reconstruction
+from engine.stages.segmentation import segment_frame
 from engine.synthetic.scene import SceneSpec, make_scene, write_scene
 
 
@@ -87,6 +90,73 @@ def test_same_input_same_curve(capture, result):
     folder, _ = capture
     again = reconstruct(folder / "images", cameras=folder / "sparse")
     np.testing.assert_array_equal(again.paths[0].points, result[0].paths[0].points)
+
+
+def test_one_worker_or_several_give_the_same_curve(capture, result):
+    folder, _ = capture
+    for workers in (1, 3):
+        again = run_reconstruction(folder / "images", cameras=folder / "sparse",
+                                   settings=PipelineSettings(workers=workers)).result
+        assert again.to_dict() | {"timings": {}, "run": {}} \
+            == result[0].to_dict() | {"timings": {}, "run": {}}
+        assert again.run["settings"]["workers"] == workers
+
+
+def _slow_cameras(stopped):
+    """A camera estimation that works until it is stopped (the masks beside it failed, or
+    the user cancelled), as pycolmap's does."""
+    def cameras(sequence, cameras, settings, stage, cancel):
+        stage(0.1, "features")
+        for _ in range(600):
+            if cancel.is_set():
+                stopped.append(True)
+                raise Cancelled("camera estimation was cancelled")
+            time.sleep(0.05)
+        raise AssertionError("the camera estimation was never stopped")
+    return cameras
+
+
+def test_masks_made_beside_the_camera_estimation_fail_first_and_stop_it(capture, monkeypatch):
+    folder, _ = capture
+    stopped = []
+    monkeypatch.setattr(pipeline, "_cameras", _slow_cameras(stopped))
+    with pytest.raises(ReconstructionError, match="no cable pixels in any frame"):
+        run_reconstruction(folder / "images", colour="100,250,250,101,255,255",  # no pixel
+                           settings=PipelineSettings(workers=2))
+    assert stopped == [True]
+
+
+def test_cameras_that_fail_beside_the_masks_say_why_and_stop_them(capture, monkeypatch):
+    folder, _ = capture
+    segmented = []
+
+    def failing(sequence, cameras, settings, stage, cancel):
+        raise ReconstructionError("camera estimation failed: only 1 of 24 frames registered")
+
+    def counted(*args, **kwargs):
+        segmented.append(1)
+        return segment_frame(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "_cameras", failing)
+    monkeypatch.setattr(pipeline, "segment_frame", counted)
+    with pytest.raises(ReconstructionError, match="only 1 of 24 frames registered"):
+        run_reconstruction(folder / "images", settings=PipelineSettings(workers=2))
+    assert len(segmented) < 24  # the masks were stopped, not all made
+
+
+def test_a_cancel_stops_the_masks_and_the_cameras_side_by_side(capture, monkeypatch):
+    folder, _ = capture
+    stopped, cancel = [], threading.Event()
+    monkeypatch.setattr(pipeline, "_cameras", _slow_cameras(stopped))
+
+    def progress(fraction, message):
+        if message.startswith("masks"):
+            cancel.set()
+
+    with pytest.raises(Cancelled):
+        run_reconstruction(folder / "images", settings=PipelineSettings(workers=2),
+                           progress=progress, cancel=cancel)
+    assert stopped == [True]
 
 
 def test_command_line_writes_result_and_obj_and_never_overwrites(capture, tmp_path):

@@ -7,7 +7,7 @@ from ..errors import InputError
 __all__ = ["STAGES", "add_bench_command", "run_bench"]
 
 STAGES = ("segment", "looks", "cameras", "carve", "rod", "pipeline", "pipeline-looks", "topology",
-          "faults", "preview", "curve", "cancel", "memory", "batch", "scaling")
+          "faults", "preview", "curve", "cancel", "memory", "batch", "scaling", "speed")
 
 
 def add_bench_command(commands, *, parents=()):
@@ -115,6 +115,13 @@ def run_bench(args):
 
         rows = bench_scaling(progress=None if args.quiet else ProgressBar())
         print(format_table(rows, SCALING_COLUMNS))
+        return
+    elif args.stage == "speed":
+        from .speed import SPEED_COLUMNS, bench_speed
+
+        rows = bench_speed(views=args.views, sample=args.sample,
+                           progress=None if args.quiet else ProgressBar())
+        print(format_table(rows, SPEED_COLUMNS))
         return
     elif args.stage == "batch":
         from .batch import bench_batch

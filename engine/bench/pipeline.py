@@ -51,8 +51,8 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, 
     """In a fresh process: reconstruct one capture (with ``masks`` if given, and ``settings``,
     a :class:`.pipeline.PipelineSettings`, if given) and score it; with ``details``, the row
     also holds ``checks``: ``(right, confidence)`` of each true crossing; with ``profile``,
-    the reconstruction runs under cProfile, on one thread (OpenCV's and the carving's too),
-    and the row holds ``profile`` (:func:`engine.bench.profile.engine_times`).
+    the reconstruction runs under cProfile, on one thread (OpenCV's, the carving's and the
+    workers' too), and the row holds ``profile`` (:func:`engine.bench.profile.engine_times`).
 
     The process may use at most :data:`MEMORY_LIMIT` bytes: a run past it is a row with its
     error, not a machine out of memory.
@@ -73,7 +73,7 @@ def scored_run(folder, truth_file, use_true_cameras, masks=None, settings=None, 
 
         cv2.setNumThreads(1)
         settings = settings or PipelineSettings()
-        settings = replace(settings, carving=replace(settings.carving, threads=1))
+        settings = replace(settings, workers=1, carving=replace(settings.carving, threads=1))
     inputs = dict(cameras=folder / "sparse" if use_true_cameras else None, masks=masks,
                   **({} if settings is None else {"settings": settings}))
     try:

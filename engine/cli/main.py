@@ -50,12 +50,13 @@ class ProgressBar:
 
 def _add_run_arguments(parser, groups):
     """The settings flags of ``groups`` (each with its prefix), ``--no-agreement``,
-    ``--reference-frame`` and ``--settings``."""
+    ``--reference-frame``, ``--workers`` and ``--settings``."""
     from dataclasses import fields
 
     from ..pipeline import PipelineSettings
 
-    frame = next(field for field in fields(PipelineSettings) if field.name == "reference_frame")
+    own = {field.name: field for field in fields(PipelineSettings)}
+    frame, workers = own["reference_frame"], own["workers"]
     parser.add_argument("--settings", metavar="RUN_JSON",
                         help="start from the settings (and the colour and scale) of an earlier "
                              "run: its result file, or a run file saved in Blender; the flags "
@@ -63,6 +64,11 @@ def _add_run_arguments(parser, groups):
     parser.add_argument("--reference-frame", type=checked_type(frame, "--reference-frame"),
                         default=argparse.SUPPRESS,
                         help=f"frame the automatic colour is taken from (default {frame.default})")
+    parser.add_argument("--workers", type=checked_type(workers, "--workers"),
+                        default=argparse.SUPPRESS,
+                        help="threads for the work done frame by frame and view by view, and "
+                             "for the masks beside the camera estimation (default 0: one per "
+                             "CPU; the result is the same on any number)")
     if "agreement" in groups:
         parser.add_argument("--no-agreement", action="store_true",
                             help="use each frame's mask as segmented, not checked against the "

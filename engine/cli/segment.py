@@ -10,12 +10,11 @@ import numpy as np
 from ..errors import InputError, ReconstructionError
 from ..io.files import check_writable, write_image
 from ..io.image_sequence import open_image_sequence
-from ..io.packed_mask import PackedMask
-from ..pipeline import PipelineSettings, sequence_cameras
-from ..progress import StageProgress, check_cancel
+from ..pipeline import PipelineSettings, segment_frames, sequence_cameras
+from ..progress import StageProgress
 from ..stages.mask_agreement import agree_masks
 from ..stages.segmentation import (SeveralCables, reference_frames,
-                                   segment_frame, sequence_colour)
+                                   sequence_colour)
 
 __all__ = ["segment_sequence_to_folder", "contact_sheet"]
 
@@ -110,15 +109,8 @@ def segment_sequence_to_folder(images, output, *, colour=None, settings=Pipeline
         colour, model = _colour_model(sequence, colour, settings.segmentation, reference_frame)
         # the segmentation's share of the progress bar (estimating cameras takes long)
         share = (0.3 if cameras is None else 0.6) if agree else 1.0
-        frame_masks, frame_junctions, widths = [], [], []
-        for k, name in enumerate(sequence.names):
-            check_cancel(cancel, "segmenting")
-            segmentation = segment_frame(sequence.read(k), colour, settings.segmentation,
-                                         model=model)
-            frame_masks.append(PackedMask(segmentation.mask))
-            frame_junctions.append(PackedMask(segmentation.junctions))
-            widths.append(segmentation.width)
-            stage(share * (k + 1) / len(sequence), f"segment {name}")
+        frame_masks, frame_junctions, widths = segment_frames(
+            sequence, colour, model, settings, progress=stage.part(0.0, share), cancel=cancel)
         empty = [name for name, mask in zip(sequence.names, frame_masks) if not mask.any()]
         segmented = list(frame_masks)
         if agree and not empty:
@@ -191,7 +183,7 @@ def _agreed(sequence, masks, junctions, cameras, settings, stage, cancel):
                                      carving=settings.carving, settings=settings.agreement,
                                      segmentation=settings.segmentation,
                                      progress=stage.part(0.8 if cameras is None else 0.05, 1.0),
-                                     cancel=cancel, packed=True)
+                                     cancel=cancel, packed=True, workers=settings.workers)
     except ReconstructionError as error:  # the carve is over its memory budget
         log.warning("warning: masks written as segmented, not agreed across views: %s", error)
         return masks, junctions

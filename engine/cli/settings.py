@@ -114,13 +114,15 @@ def add_pipeline_arguments(parser, groups=PIPELINE_GROUPS, *, aliases=("segmenta
 
 def pipeline_from_arguments(args, base=None, groups=PIPELINE_GROUPS):
     """A :class:`~engine.pipeline.PipelineSettings`: ``base`` (default the defaults) with what
-    the command line gives for ``groups``, and ``--reference-frame`` if given."""
+    the command line gives for ``groups``, and ``--reference-frame`` and ``--workers`` if
+    given."""
     from ..pipeline import PipelineSettings
 
     base = base if base is not None else PipelineSettings()
     changed = {name: settings_from_arguments(type(getattr(base, name)), args, prefix=name,
                                              base=getattr(base, name))
                for name in groups}
-    if getattr(args, "reference_frame", None) is not None:
-        changed["reference_frame"] = args.reference_frame
+    for name in ("reference_frame", "workers"):
+        if getattr(args, name, None) is not None:
+            changed[name] = getattr(args, name)
     return dataclasses.replace(base, **changed)

@@ -34,9 +34,6 @@ comes from the cable's radius, estimated from its width in the images unless giv
 
 import logging
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
-from contextlib import nullcontext
 from dataclasses import dataclass
 
 import cv2
@@ -47,6 +44,7 @@ from ..geometry.upright import look_at_point
 from ..io.packed_mask import PackedMask, unpacked
 from ..progress import StageProgress, check_cancel
 from ..settings import check_settings, setting
+from ..threads import worker_pool
 from . import sparse_voxels
 from .segmentation import cable_width
 
@@ -56,9 +54,13 @@ log = logging.getLogger(__name__)
 
 #: The 8 children of a voxel, as offsets of twice its index.
 _CHILDREN = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.int64)
-#: Voxels projected per batch (bounds the memory of one view's projection; batches are shared
-#: out to the threads).
+#: Voxels projected per batch (bounds the memory of one view's projection).
 _BATCH = 1 << 17
+#: Views voted on between two drops of the voxels that cannot pass any more (their votes are
+#: shared out to the threads, a view each).
+_GROUP = 5
+#: A view's vote on a voxel, a bit each (and 8: on a junction pixel, at the fine level).
+_SEEN, _COUNTED, _HIT = 1, 2, 4
 #: Bytes a voxel of a level costs while it is voted on (its index, lattice and votes).
 _LEVEL_BYTES = 80
 #: Past the memory budget, the carve is tried again in voxels twice as large while there are
@@ -104,7 +106,8 @@ class CarvingSettings:
     coarse_to_fine : bool
         Carve coarse to fine; off, every fine voxel of the region is tested (slow: for tests).
     threads : int
-        Threads voting on voxels (0: one per CPU).
+        Threads voting on voxels, a view each (0: one per CPU, at most
+        :data:`~engine.threads.MOST_THREADS`); the grid is the same on any number.
     cache_mb : float
         The views' distance maps (2 bytes a pixel) are kept between levels when they fit in
         this many megabytes, and recomputed at each level when not.
@@ -319,33 +322,25 @@ class _Carver:
         alive = np.arange(len(index))  # the voxels still in the running, and their votes:
         seen, counted, hits, junction_hits = (np.zeros(len(index), dtype=np.int32)
                                               for _ in range(4))
+        # The views are voted on a group at a time, a view a thread (its mask unpacked, its
+        # distance map made and every voxel projected into it there), and their votes added
+        # in the views' order: whole numbers, so the sums are the same on any number of
+        # threads. After each group the voxels that cannot pass any more are dropped.
         batches = list(_batches(index))
-        for number, view in enumerate(self.views):
+        for first in range(0, total, _GROUP):
+            group = range(first, min(first + _GROUP, total))
             check_cancel(self.cancel, "carving")
-            mask = view.mask()
-            junction = unpacked(view.junction) if fine and view.junction is not None else None
-            if not fine:
-                distance = view.distance(mask)
-
-            def vote(batch):
-                part, lattice = batch
+            codes = self.pool.map(lambda number: self._view_votes(
+                self.views[number], batches, len(index), size, fine), group)
+            for number, code in zip(group, codes):
+                seen += code & _SEEN
+                counted += (code & _COUNTED) >> 1
+                hits += (code & _HIT) >> 2
                 if fine:
-                    s, h, j = _fine_votes(view.camera, mask, lattice, self.lower, size, junction)
-                    counted[part] += s
-                    if j is not None:
-                        junction_hits[part] += j
-                else:
-                    s, c, h = _coarse_votes(view.camera, distance, lattice, self.lower, size)
-                    counted[part] += c
-                seen[part] += s
-                hits[part] += h
-
-            # batches are disjoint slices: threads can vote on them at once (NumPy releases
-            # the GIL on large arrays)
-            for _ in self.pool.map(vote, batches):
-                pass
-            remaining = total - number - 1
-            if remaining and (number + 1) % 5 == 0:
+                    junction_hits += code >> 3
+                self.progress((number + 1) / total, "carving")
+            remaining = total - group[-1] - 1
+            if remaining:
                 # drop the voxels that cannot pass any more: at best every remaining view sees
                 # and hits them (a coarse voxel's hit need not count)
                 gain = remaining * (1.0 - settings.vote) if fine else remaining
@@ -356,11 +351,29 @@ class _Carver:
                     seen, counted, hits, junction_hits = (
                         votes[possible] for votes in (seen, counted, hits, junction_hits))
                     batches = list(_batches(index))
-            self.progress((number + 1) / total, "carving")
         passed = (seen >= least) & (hits >= settings.vote * counted - 1e-9)
         junction = (junction_hits >= settings.vote * counted - 1e-9) & passed if fine else None
         return alive[passed], counted[passed], hits[passed], \
             (junction[passed] if fine else None)
+
+    def _view_votes(self, view, batches, count, size, fine):
+        """One view's votes on the ``count`` voxels of ``batches``, a byte each: seen
+        (:data:`_SEEN`), counted, hit and, at the fine level, on a junction."""
+        check_cancel(self.cancel, "carving")
+        mask = view.mask()
+        junction = unpacked(view.junction) if fine and view.junction is not None else None
+        distance = None if fine else view.distance(mask)
+        code = np.zeros(count, dtype=np.uint8)
+        for part, lattice in batches:
+            if fine:
+                s, h, j = _fine_votes(view.camera, mask, lattice, self.lower, size, junction)
+                c = s  # a fine voxel counts where it is seen
+            else:
+                s, c, h = _coarse_votes(view.camera, distance, lattice, self.lower, size)
+                j = None
+            votes = s.view(np.uint8) | (c.view(np.uint8) << 1) | (h.view(np.uint8) << 2)
+            code[part] = votes if j is None else votes | (j.view(np.uint8) << 3)
+        return code
 
 
 def _batches(index):
@@ -454,9 +467,7 @@ def _carve_levels(views, lower, side, fine, radius, settings, stage, cancel):
     _check_memory(cells ** 3 * _LEVEL_BYTES, settings, f"{cells ** 3:,} voxels at level {levels}")
     index = np.argwhere(np.ones((cells,) * 3, dtype=bool)).astype(np.int64)
     steps = levels + 1
-    threads = settings.threads or os.cpu_count() or 1
-    with (ThreadPoolExecutor(threads, thread_name_prefix="carve") if threads > 1
-          else nullcontext(_ThisThread())) as pool:
+    with worker_pool(settings.threads, "carve") as pool:
         for level in range(levels, -1, -1):
             size = fine * 2 ** level
             carver = _Carver(views, lower, settings, pool,
@@ -476,15 +487,6 @@ def _carve_levels(views, lower, side, fine, radius, settings, stage, cancel):
                   f"{len(index):,} occupied voxels ({core:,} in the core)")
     stage(1.0, "carved")
     return _grid(index, junction[large], counted[large], hits[large], lower, fine, radius)
-
-
-class _ThisThread:
-    """A pool of one thread, this one: the votes in order, with no worker to hand them to
-    (a profiler then sees the work where it is asked for)."""
-
-    @staticmethod
-    def map(function, items):
-        return map(function, items)
 
 
 class _OverBudget(ReconstructionError):

@@ -153,13 +153,25 @@ def _clusters(image_rgb, clusters=_CLUSTERS, size=_SMALL):
 
 def _nearest(lab, centres):
     """Each pixel's nearest cluster centre (Lab; the first of equals), one centre at a time
-    (all at once took 100 bytes a pixel: 3 GB for an 8K frame)."""
-    nearest = np.zeros(lab.shape[:2], dtype=np.int64)
-    best = np.full(lab.shape[:2], np.inf, dtype=np.float32)
+    on whole colour planes (all centres at once took 100 bytes a pixel: 3 GB for an 8K
+    frame; a centre at a time on the pixels' colour triples was 9 times slower). The squared
+    distance adds the channels in their order, as a sum over the last axis does."""
+    planes = [np.ascontiguousarray(lab[..., channel], dtype=np.float32) for channel in range(3)]
+    shape = lab.shape[:2]
+    nearest = np.zeros(shape, dtype=np.int64)
+    best = np.full(shape, np.inf, dtype=np.float32)
+    distance, term = np.empty(shape, np.float32), np.empty(shape, np.float32)
+    closer = np.empty(shape, dtype=bool)
     for k, centre in enumerate(np.asarray(centres, dtype=np.float32)):
-        distance = ((lab - centre) ** 2).sum(axis=2)
-        closer = distance < best
-        nearest[closer], best[closer] = k, distance[closer]
+        np.subtract(planes[0], centre[0], out=distance)
+        np.multiply(distance, distance, out=distance)
+        for channel in (1, 2):
+            np.subtract(planes[channel], centre[channel], out=term)
+            np.multiply(term, term, out=term)
+            np.add(distance, term, out=distance)
+        np.less(distance, best, out=closer)
+        np.putmask(nearest, closer, k)
+        np.putmask(best, closer, distance)
     return nearest
 
 

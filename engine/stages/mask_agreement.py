@@ -46,6 +46,7 @@ import numpy as np
 from ..io.packed_mask import PackedMask, unpacked
 from ..progress import StageProgress, check_cancel
 from ..settings import check_settings, setting
+from ..threads import map_in_order, worker_pool
 from .carving import CarvingSettings, carve
 from .segmentation import SegmentationSettings, cable_width, junction_map
 from .skeleton_2d import fill_small_holes, thin
@@ -163,7 +164,7 @@ def _packed(item):
 
 def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=CarvingSettings(),
                 settings=MaskAgreementSettings(), segmentation=SegmentationSettings(),
-                progress=None, cancel=None, packed=False):
+                progress=None, cancel=None, packed=False, workers=1):
     """Masks with what no other view backs removed and breaks the others bridge filled.
 
     Parameters
@@ -187,8 +188,12 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
     cancel : threading.Event, optional
     packed : bool, optional
         Return the masks and the report's junction maps as :class:`.PackedMask`: the masks
-        are held packed throughout (one view's arrays at a time), for long sequences of
-        large frames.
+        are held packed throughout (one view's arrays at a time on each worker), for long
+        sequences of large frames.
+    workers : int, optional
+        Threads agreeing the views' masks with the voxels, a view each at a time (0: one per
+        CPU, at most :data:`~engine.threads.MOST_THREADS`); the masks are the same on any
+        number.
 
     Returns
     -------
@@ -224,7 +229,7 @@ def agree_masks(cameras, masks, *, evidence=None, junctions=None, carving=Carvin
         radius = grid.radius
         voxels = _Voxels(grid, carving, len(cameras))
         pixels, count, left_alone = _agree_views(cameras, current, evidence, voxels, settings,
-                                                 part.part(0.6, 1.0), cancel)
+                                                 part.part(0.6, 1.0), cancel, workers)
         changed.append(pixels)
         log.debug("agreement round %d: %d pixels changed", number + 1, pixels)
         if (pixels <= settings.min_change * max(count, 1)
@@ -255,22 +260,32 @@ def _checked_inputs(cameras, masks, evidence, junctions):
     return given, evidence
 
 
-def _agree_views(cameras, current, evidence, voxels, settings, progress, cancel):
+def _agree_views(cameras, current, evidence, voxels, settings, progress, cancel, workers):
     """One round: every view's mask agreed with the voxels (``current`` updated in place);
     ``(pixels changed, cable pixels now, views left alone)``."""
-    pixels, count, left_alone = 0, 0, []
-    for k, camera in enumerate(cameras):
+
+    def agreed(k):
         check_cancel(cancel, "the mask agreement")
         mask = current[k]()
-        new, judged = _agree_view(camera, mask, unpacked(evidence[k], np.float32), voxels,
+        new, judged = _agree_view(cameras[k], mask, unpacked(evidence[k], np.float32), voxels,
                                   settings)
         if not judged:
-            left_alone.append(camera.name)
-        elif new is not mask:
-            pixels += int(np.count_nonzero(new != mask))
-            current[k] = PackedMask(new)
-        count += current[k].count
+            return None, None
+        return (None, 0) if new is mask else (PackedMask(new), int(np.count_nonzero(new != mask)))
+
+    def done(k):
         progress((k + 1) / len(cameras), "agreeing masks")
+
+    with worker_pool(workers, "agree") as pool:
+        outcomes = map_in_order(pool, agreed, range(len(cameras)), done)
+    pixels, count, left_alone = 0, 0, []
+    for k, (new, changed) in enumerate(outcomes):
+        if changed is None:
+            left_alone.append(cameras[k].name)
+        elif new is not None:
+            pixels += changed
+            current[k] = new
+        count += current[k].count
     return pixels, count, left_alone
 
 

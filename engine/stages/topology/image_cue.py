@@ -10,14 +10,17 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from ...progress import check_cancel
+from ...threads import map_in_order, worker_pool
 from .context import load
 
 __all__ = ["image_cue"]
 
 
-def image_cue(junctions, views, context, report, cancel):
-    """Fill each junction's ``view_costs``: shortest-path costs between its branch points."""
-    r, s = context.r, context.settings
+def image_cue(junctions, views, context, report, cancel, workers=1):
+    """Fill each junction's ``view_costs``: shortest-path costs between its branch points,
+    the views read on ``workers`` threads (0: one per CPU) and their costs added in the views'
+    order."""
+    r = context.r
     usable = [j for j in junctions if len(j.branches) >= 3 and not j.greedy]
     if not usable or not views:
         return
@@ -30,48 +33,64 @@ def image_cue(junctions, views, context, report, cancel):
     cable = np.vstack(cable) if cable else np.zeros((0, 3))
     local = [np.linalg.norm(cable - j.centre, axis=1) <= j.anchor_distance + 3.0 * r
              for j in usable]
-    for index, view in enumerate(views):
+
+    def read(index):
         check_cancel(cancel, "resolving the topology")
-        report(index / len(views), "reading the images at the junctions")
-        camera = view.camera
-        mask = image = junction_mask = None
-        cable_px, cable_depth = camera.project(cable)
-        for junction, near in zip(usable, local):
-            points = np.vstack([junction.centre] + [b.anchor for b in junction.branches])
-            pixels, depth = camera.project(points)
-            if not np.all(depth > 0) or not np.all(np.isfinite(pixels)):
-                continue
-            r_px = camera.focal[0] * r / depth[0]
-            if r_px < s.min_pixel_radius:
-                continue
-            pad = 2.0 * r_px + 3.0
-            if (pixels[:, 0].min() < pad or pixels[:, 1].min() < pad
-                    or pixels[:, 0].max() > camera.width - pad
-                    or pixels[:, 1].max() > camera.height - pad):
-                continue
-            weight = _view_weight(camera, junction, pixels, r_px, context)
-            if weight <= 0:
-                continue
-            if _occluded(pixels, depth[0], cable_px[~near], cable_depth[~near], r_px, r, camera,
-                         s):
-                continue
-            if mask is None:
-                mask = load(view.mask, bool)
-                image = load(view.image)
-                junction_mask = load(view.junctions, bool) if view.junctions is not None \
-                    else None
-                if image is None or mask is None:
-                    raise ValueError(f"views[{index}]: no image or no mask")
-                if mask.shape != image.shape[:2]:
-                    raise ValueError(f"views[{index}]: the image is {image.shape[1::-1]}, its "
-                                     f"mask {mask.shape[::-1]}")
-            if junction_mask is not None and not _near_junction_pixel(junction_mask, pixels[0],
-                                                                      2.0 * r_px):
-                weight *= 0.5
-            costs = _path_costs(image, mask, pixels[1:], r_px, s)
-            if costs is not None:
-                junction.view_costs.append((index, weight, costs))
-    report(1.0, "reading the images at the junctions")
+        return _view_costs(index, views[index], usable, local, cable, context)
+
+    def done(index):
+        report((index + 1) / len(views), "reading the images at the junctions")
+
+    report(0.0, "reading the images at the junctions")
+    with worker_pool(workers, "image-cue") as pool:
+        found = map_in_order(pool, read, range(len(views)), done)
+    for costs in found:
+        for number, entry in costs:
+            usable[number].view_costs.append(entry)
+
+
+def _view_costs(index, view, usable, local, cable, context):
+    """``(junction number, (index, weight, costs))`` of each usable junction the view
+    ``index`` shows clearly (its image and mask loaded only if one does)."""
+    r, s = context.r, context.settings
+    camera = view.camera
+    mask = image = junction_mask = None
+    cable_px, cable_depth = camera.project(cable)
+    found = []
+    for number, (junction, near) in enumerate(zip(usable, local)):
+        points = np.vstack([junction.centre] + [b.anchor for b in junction.branches])
+        pixels, depth = camera.project(points)
+        if not np.all(depth > 0) or not np.all(np.isfinite(pixels)):
+            continue
+        r_px = camera.focal[0] * r / depth[0]
+        if r_px < s.min_pixel_radius:
+            continue
+        pad = 2.0 * r_px + 3.0
+        if (pixels[:, 0].min() < pad or pixels[:, 1].min() < pad
+                or pixels[:, 0].max() > camera.width - pad
+                or pixels[:, 1].max() > camera.height - pad):
+            continue
+        weight = _view_weight(camera, junction, pixels, r_px, context)
+        if weight <= 0:
+            continue
+        if _occluded(pixels, depth[0], cable_px[~near], cable_depth[~near], r_px, r, camera, s):
+            continue
+        if mask is None:
+            mask = load(view.mask, bool)
+            image = load(view.image)
+            junction_mask = load(view.junctions, bool) if view.junctions is not None else None
+            if image is None or mask is None:
+                raise ValueError(f"views[{index}]: no image or no mask")
+            if mask.shape != image.shape[:2]:
+                raise ValueError(f"views[{index}]: the image is {image.shape[1::-1]}, its "
+                                 f"mask {mask.shape[::-1]}")
+        if junction_mask is not None and not _near_junction_pixel(junction_mask, pixels[0],
+                                                                  2.0 * r_px):
+            weight *= 0.5
+        costs = _path_costs(image, mask, pixels[1:], r_px, s)
+        if costs is not None:
+            found.append((number, (index, weight, costs)))
+    return found
 
 
 def _view_weight(camera, junction, pixels, r_px, context):

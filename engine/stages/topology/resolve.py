@@ -21,7 +21,7 @@ log = logging.getLogger(__name__)
 
 
 def resolve_topology(graph, views, *, radius, up, settings=TopologySettings(), progress=None,
-                     cancel=None):
+                     cancel=None, workers=1):
     """Decide over/under at every junction and join the segments into one path per cable.
 
     Parameters
@@ -43,6 +43,9 @@ def resolve_topology(graph, views, *, radius, up, settings=TopologySettings(), p
         ``progress(fraction, message)``.
     cancel : threading.Event, optional
         When set, :class:`~engine.errors.Cancelled` is raised at the next check.
+    workers : int, optional
+        Threads reading the views at the junctions (0: one per CPU); the topology is the same
+        on any number.
 
     Returns
     -------
@@ -72,7 +75,7 @@ def resolve_topology(graph, views, *, radius, up, settings=TopologySettings(), p
     report(0.0, "branches")
     context, junctions = _prepare(graph, float(radius), up, settings, warnings)
     check_cancel(cancel, "resolving the topology")
-    image_cue(junctions, views, context, report.part(0.05, 0.8), cancel)
+    image_cue(junctions, views, context, report.part(0.05, 0.8), cancel, workers)
     report(0.8, "hypotheses")
     return _resolve(junctions, context, warnings, report, cancel)
 
