@@ -224,7 +224,8 @@ def measure_radius(points, views, *, junction_margin=1.0, workers=1):
     junction_margin : float, optional
         Points within this many cable widths of a junction pixel are left out.
     workers : int, optional
-        Threads reading the views (0: one per CPU); the radius is the same on any number.
+        Threads reading the views (0: one per CPU, at most
+        :data:`~engine.threads.MOST_THREADS`); the radius is the same on any number.
 
     Returns
     -------

@@ -131,11 +131,15 @@ def test_bad_batch_input_is_one_line(sequences, tmp_path):
 
 def test_a_cancelled_batch_stops_its_runs_and_leaves_no_result(sequences, tmp_path):
     cancel = threading.Event()
-    started = []
+    started = set()
 
     def progress(fraction, message):
-        started.append(message)
-        if "masks" in message:  # both runs are under way
+        # "0/3 done; alpha 4% masks: 000.jpg; beta 0%": a run that names its stage is under way
+        for part in message.split("; ")[1:]:
+            name, _, stage = part.partition(" ")
+            if stage.partition("% ")[2]:
+                started.add(name)
+        if started >= {"alpha", "beta"}:  # both runs are under way
             cancel.set()
 
     output = tmp_path / "out"

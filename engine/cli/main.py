@@ -68,7 +68,7 @@ def _add_run_arguments(parser, groups):
                         default=argparse.SUPPRESS,
                         help="threads for the work done frame by frame and view by view, and "
                              "for the masks beside the camera estimation (default 0: one per "
-                             "CPU; the result is the same on any number)")
+                             "CPU, at most 4; the result is the same on any number)")
     if "agreement" in groups:
         parser.add_argument("--no-agreement", action="store_true",
                             help="use each frame's mask as segmented, not checked against the "

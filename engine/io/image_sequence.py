@@ -5,7 +5,6 @@ file: a missing or empty folder, a file that is not an image, a truncated JPEG (
 decoder would fill with grey and only warn about), frames of different sizes.
 """
 
-import functools
 import logging
 import shutil
 import tempfile
@@ -79,6 +78,8 @@ class ImageSequence:
     paths : tuple of pathlib.Path
         One image file per frame (for a video: frames extracted into ``work_dir``).
     width, height : int
+    focal_length_px : float or None
+        Focal length from the frames' EXIF data (35 mm equivalent scaled to the image), if any.
     work_dir : pathlib.Path or None
         Where a video's frames were extracted; removed by :meth:`close`.
     """
@@ -87,14 +88,8 @@ class ImageSequence:
     paths: tuple
     width: int
     height: int
+    focal_length_px: float = None
     work_dir: Path = None
-
-    @functools.cached_property
-    def focal_length_px(self):
-        """Focal length from the first frame's EXIF data (35 mm equivalent scaled to the
-        image), or None; read when first asked for (only an estimate of the cameras needs
-        it, and pycolmap's reader is slow to load)."""
-        return _exif_focal_length(self.paths[0], self.width, self.height)
 
     def __len__(self):
         return len(self.paths)
@@ -227,6 +222,7 @@ def open_image_sequence(source, *, video_frames=40, work_dir=None):
         elif shape != size:
             raise InputError(f"{path} is {shape[0]}x{shape[1]} but {first.name} is "
                              f"{size[0]}x{size[1]}: all frames must have the same size")
+    focal = _exif_focal_length(paths[0], *size)
     log.info("%d frames of %dx%d from %s", len(paths), size[0], size[1], source)
     return ImageSequence(source=source, paths=tuple(paths), width=size[0], height=size[1],
-                         work_dir=extracted if work_dir is None else None)
+                         focal_length_px=focal, work_dir=extracted if work_dir is None else None)

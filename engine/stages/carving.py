@@ -106,8 +106,8 @@ class CarvingSettings:
     coarse_to_fine : bool
         Carve coarse to fine; off, every fine voxel of the region is tested (slow: for tests).
     threads : int
-        Threads voting on voxels, a view each (0: one per CPU, at most
-        :data:`~engine.threads.MOST_THREADS`); the grid is the same on any number.
+        Threads voting on voxels, a view each (0: one per CPU, at most 4); the grid is the
+        same on any number.
     cache_mb : float
         The views' distance maps (2 bytes a pixel) are kept between levels when they fit in
         this many megabytes, and recomputed at each level when not.

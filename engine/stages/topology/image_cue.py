@@ -18,8 +18,8 @@ __all__ = ["image_cue"]
 
 def image_cue(junctions, views, context, report, cancel, workers=1):
     """Fill each junction's ``view_costs``: shortest-path costs between its branch points,
-    the views read on ``workers`` threads (0: one per CPU) and their costs added in the views'
-    order."""
+    the views read on ``workers`` threads (see :func:`~engine.threads.thread_count`) and their
+    costs added in the views' order."""
     r = context.r
     usable = [j for j in junctions if len(j.branches) >= 3 and not j.greedy]
     if not usable or not views:

@@ -44,8 +44,8 @@ def resolve_topology(graph, views, *, radius, up, settings=TopologySettings(), p
     cancel : threading.Event, optional
         When set, :class:`~engine.errors.Cancelled` is raised at the next check.
     workers : int, optional
-        Threads reading the views at the junctions (0: one per CPU); the topology is the same
-        on any number.
+        Threads reading the views at the junctions (0: one per CPU, at most
+        :data:`~engine.threads.MOST_THREADS`); the topology is the same on any number.
 
     Returns
     -------
