@@ -35,7 +35,8 @@ from .io.image_sequence import VIDEO_SUFFIXES, frame_files
 from .threads import MOST_THREADS, cpu_count
 
 __all__ = ["BATCH_FORMAT", "RUN_FILE", "SUMMARY", "Sequence", "SequenceOutcome",
-           "find_sequences", "run_batch", "sequence_outputs", "batch_exit_code", "summary_table"]
+           "engine_command", "find_sequences", "run_batch", "sequence_outputs", "batch_exit_code",
+           "summary_table"]
 
 log = logging.getLogger(__name__)
 
@@ -166,7 +167,7 @@ def find_sequences(folder):
     return list(found.values())
 
 
-def _engine_command():
+def engine_command():
     """``python -m engine`` as a child process runs it, and the environment it needs: the
     engine's parent folder and this process's import path (in Blender: the extension's
     wheels) on its path."""
@@ -404,7 +405,7 @@ def _with_result(outcome, result):
 
 
 def _start(sequence, output, options):
-    command, env = _engine_command()
+    command, env = engine_command()
     result_path, obj_path = sequence_outputs(sequence, output)
     command += ["reconstruct", str(sequence.images.resolve()), "-o", str(result_path),
                 "--settings", str(options["run_file"])]

@@ -45,7 +45,7 @@ from .stages.segment_graph import SegmentGraphSettings, extract_segment_graph_fr
 from .stages.segmentation import (ColourRange, SegmentationSettings, cable_width, junction_map,
                                   reference_frames, segment_frame, sequence_colour)
 from .stages.topology import TopologySettings, resolve_topology
-from .threads import map_in_order, thread_count, worker_pool
+from .threads import map_in_threads, thread_count
 
 __all__ = ["PipelineSettings", "RunInputs", "View", "Reconstruction", "reconstruct",
            "run_reconstruction", "read_run", "write_run", "run_record", "RUN_FORMAT",
@@ -236,9 +236,8 @@ def measure_radius(points, views, *, junction_margin=1.0, workers=1):
     tangents = np.concatenate([np.gradient(line, axis=0) if len(line) > 1
                                else np.zeros_like(line) for line in lines])
     points = np.concatenate(lines)
-    with worker_pool(workers, "radius") as pool:
-        samples = map_in_order(
-            pool, lambda view: _half_widths(view, points, tangents, junction_margin), views)
+    samples = map_in_threads(workers, "radius", lambda view: _half_widths(
+        view, points, tangents, junction_margin), views)
     samples = np.concatenate(samples) if samples else np.zeros(0)
     if not len(samples):
         return None
@@ -374,8 +373,7 @@ def segment_frames(sequence, colour, model, settings, *, progress=None, cancel=N
         if progress is not None:
             progress((number + 1) / len(sequence), f"masks: {sequence.names[number]}")
 
-    with worker_pool(settings.workers, "masks") as pool:
-        frames = map_in_order(pool, segmented, range(len(sequence)), done)
+    frames = map_in_threads(settings.workers, "masks", segmented, range(len(sequence)), done)
     return [list(column) for column in zip(*frames)] if frames else [[], [], []]
 
 
@@ -781,8 +779,7 @@ def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diamete
         return ImageEvidence.from_mask(view.camera, unpacked(view.mask),
                                        unpacked(view.junctions), settings=settings.fit)
 
-    with worker_pool(settings.workers, "evidence") as pool:
-        evidence = map_in_order(pool, read_view, views)
+    evidence = map_in_threads(settings.workers, "evidence", read_view, views)
     voxels = Voxels.from_grid(grid, agreement=settings.carving.core_agreement)
     state = Reconstruction(
         result=None, views=tuple(views), topology=topology, evidence=tuple(evidence),
@@ -858,9 +855,9 @@ def _frame_masks(sequence, masks, colour, settings, stage, cancel):
         frame_masks, frame_junctions = read_masks(masks, sequence.names, sequence.width,
                                                   sequence.height, packed=True)
         if frame_junctions is None:
-            with worker_pool(settings.workers, "junctions") as pool:
-                frame_junctions = map_in_order(
-                    pool, lambda mask: _junctions_of(mask(), settings.segmentation), frame_masks)
+            frame_junctions = map_in_threads(
+                settings.workers, "junctions",
+                lambda mask: _junctions_of(mask(), settings.segmentation), frame_masks)
         stage(1.0, "masks")
     else:
         colour, frame_masks, frame_junctions = _segment(sequence, colour, settings, stage,

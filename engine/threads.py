@@ -10,7 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 from contextlib import nullcontext
 
 __all__ = ["MOST_THREADS", "cpu_count", "thread_count", "worker_pool", "map_in_order",
-           "ThisThread"]
+           "map_in_threads", "ThisThread"]
 
 
 #: Threads a setting of 0 stands for at most: each worker of a stage holds a frame's or a
@@ -63,6 +63,12 @@ def map_in_order(pool, function, items, done=None):
         for future in futures or ():
             future.cancel()
     return results
+
+
+def map_in_threads(threads, name, function, items, done=None):
+    """:func:`map_in_order` on a :func:`worker_pool` of its own (``threads``, ``name``)."""
+    with worker_pool(threads, name) as pool:
+        return map_in_order(pool, function, items, done)
 
 
 class ThisThread:

@@ -17,15 +17,14 @@ way's accuracy (cable radii) and crossings right are beside its time, so that sp
 hides a loss. Rows end with the mean and the worst of each column.
 """
 
-import os
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import cv2
 
+from ..batch import engine_command
 from ..evaluation.metrics import evaluate
 from ..io.ground_truth import read_ground_truth
 from ..io.image_sequence import frame_files
@@ -62,26 +61,17 @@ def _decode_floor(folder):
 
 
 def _timed_reconstruct(folder, flags, out):
-    """Wall seconds of ``python -m engine reconstruct`` on a capture (process start to exit)
-    and the error it printed, if it failed."""
-    command = [sys.executable, "-P", "-m", "engine", "reconstruct", "images", *flags,
-               "-o", str(out), "--overwrite", "-q"]
+    """Wall seconds of ``python -m engine reconstruct`` on a capture (process start to exit),
+    started as a batch starts its runs, and the error it printed, if it failed."""
+    command, env = engine_command()
+    command += ["reconstruct", "images", *flags, "-o", str(out), "--overwrite", "-q"]
     started = time.perf_counter()
-    process = subprocess.run(command, cwd=folder, capture_output=True, text=True,
-                             env=_engine_environment())
+    process = subprocess.run(command, cwd=folder, capture_output=True, text=True, env=env)
     seconds = time.perf_counter() - started
     error = None
     if process.returncode != 0:
         error = (process.stderr.strip().splitlines() or [f"exit {process.returncode}"])[-1]
     return seconds, error
-
-
-def _engine_environment():
-    """The environment with this engine's folder first on ``PYTHONPATH`` (``-P`` keeps the
-    capture's folder off it)."""
-    root = str(Path(__file__).resolve().parents[2])
-    path = os.environ.get("PYTHONPATH")
-    return {**os.environ, "PYTHONPATH": root if not path else f"{root}{os.pathsep}{path}"}
 
 
 def _row(label, folder, truth):

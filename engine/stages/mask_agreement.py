@@ -46,7 +46,7 @@ import numpy as np
 from ..io.packed_mask import PackedMask, unpacked
 from ..progress import StageProgress, check_cancel
 from ..settings import check_settings, setting
-from ..threads import map_in_order, worker_pool
+from ..threads import map_in_threads
 from .carving import CarvingSettings, carve
 from .segmentation import SegmentationSettings, cable_width, junction_map
 from .skeleton_2d import fill_small_holes, thin
@@ -276,8 +276,7 @@ def _agree_views(cameras, current, evidence, voxels, settings, progress, cancel,
     def done(k):
         progress((k + 1) / len(cameras), "agreeing masks")
 
-    with worker_pool(workers, "agree") as pool:
-        outcomes = map_in_order(pool, agreed, range(len(cameras)), done)
+    outcomes = map_in_threads(workers, "agree", agreed, range(len(cameras)), done)
     pixels, count, left_alone = 0, 0, []
     for k, (new, changed) in enumerate(outcomes):
         if changed is None:

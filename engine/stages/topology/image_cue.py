@@ -10,7 +10,7 @@ from scipy import sparse
 from scipy.sparse import csgraph
 
 from ...progress import check_cancel
-from ...threads import map_in_order, worker_pool
+from ...threads import map_in_threads
 from .context import load
 
 __all__ = ["image_cue"]
@@ -42,8 +42,7 @@ def image_cue(junctions, views, context, report, cancel, workers=1):
         report((index + 1) / len(views), "reading the images at the junctions")
 
     report(0.0, "reading the images at the junctions")
-    with worker_pool(workers, "image-cue") as pool:
-        found = map_in_order(pool, read, range(len(views)), done)
+    found = map_in_threads(workers, "image-cue", read, range(len(views)), done)
     for costs in found:
         for number, entry in costs:
             usable[number].view_costs.append(entry)
