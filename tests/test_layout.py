@@ -147,7 +147,8 @@ def test_runtime_functions_are_short(path):
 
 def test_library_code_never_prints():
     command_lines = ("engine/cli/main.py", "engine/bench/cli.py", "engine/__main__.py",
-                     "addon/batch_command.py")
+                     "addon/batch_command.py",
+                     "engine/evaluation/outline_training.py")  # its main() is a command
     for path in ENGINE_FILES + ADDON_FILES:
         if path.relative_to(ROOT).as_posix() in command_lines:
             continue

@@ -102,6 +102,7 @@ def test_one_zip_per_platform_with_its_wheels_for_every_python(tmp_path):
         assert not [f for f in files if f.split("/")[0] in ("tests", "samples", "tools")]
         # the developer packages stay out; the installer test below runs without them
         assert "engine/stages/topology/resolve.py" in files and "engine/cli/main.py" in files
+        assert "engine/stages/outline_weights.json" in files  # data the runtime reads
         assert not [f for f in files if f.split("/")[:2] in DEVELOPER_PACKAGES], files
         assert not [f for f in files if "__pycache__" in f]
 

@@ -73,6 +73,7 @@ def _score_frames(name, images, masks, truth, settings):
     seconds, segmentations = _timed(images, colour, settings, model)
     plain_seconds, _ = _timed(images, colour, replace(settings, edge_reach=0), model)
     sideless_seconds, _ = _timed(images, colour, replace(settings, side_reach=0.0), model)
+    unclassified_seconds, _ = _timed(images, colour, replace(settings, outline_passes=0), model)
     ious, found, visible, stray, total = [], 0, 0, 0, 0
     for segmentation, mask, camera in zip(segmentations, masks, truth.cameras):
         ious.append((segmentation.mask & mask).sum() / max((segmentation.mask | mask).sum(), 1))
@@ -85,7 +86,8 @@ def _score_frames(name, images, masks, truth, settings):
             "junction_stray": stray / total if total else 0.0,
             "ms_per_frame": 1000 * plain_seconds / len(images),
             "ms_with_edges": 1000 * seconds / len(images),
-            "ms_without_side": 1000 * sideless_seconds / len(images), "hsv": str(colour)}
+            "ms_without_side": 1000 * sideless_seconds / len(images),
+            "ms_without_outline": 1000 * unclassified_seconds / len(images), "hsv": str(colour)}
 
 
 #: The fast-render families: (label, SceneSpec options, first seed). A family's seeds are its
@@ -97,7 +99,7 @@ FAMILIES = (("table 3", dict(crossings=3), 1), ("table 6", dict(crossings=6), 2)
 
 #: What a family's mean and worst rows summarise, and of those the columns where more is better.
 _SPREAD = ("iou_mean", "iou_min", "junction_recall", "junction_stray", "ms_per_frame",
-           "ms_with_edges", "ms_without_side")
+           "ms_with_edges", "ms_without_side", "ms_without_outline")
 _HIGHER_IS_BETTER = ("iou_mean", "iou_min", "junction_recall")
 
 
@@ -111,7 +113,8 @@ def bench_segment(*, sample=DEFAULT_SAMPLE, views=30, seeds=3, settings=Segmenta
     worst stray share and time the largest). ``ms_per_frame`` is the segmentation and junction
     map alone (``edge_reach=0``), ``ms_with_edges`` with the outline's refinement (every
     default), ``ms_without_side`` every default but the missing side's search
-    (``side_reach=0``); each the fastest of three passes over the frames, the three timed
+    (``side_reach=0``), ``ms_without_outline`` every default but the outline's classifier
+    (``outline_passes=0``); each the fastest of three passes over the frames, the four timed
     one after the other on the same frames (on a busy machine only their differences say
     much).
     """

@@ -1,8 +1,10 @@
-"""Per-pixel colour helpers the mask steps share: chromaticity, brightness and the cable's box."""
+"""Per-pixel helpers the mask steps share: chromaticity, brightness, the cable's box and colours
+read between pixels."""
 
+import cv2
 import numpy as np
 
-__all__ = ["CHROMA_FLOOR", "brightness", "cable_box", "chroma"]
+__all__ = ["CHROMA_FLOOR", "brightness", "cable_box", "chroma", "sample_at"]
 
 #: Pixels darker than this (sum of R, G, B) have no reliable chromaticity.
 CHROMA_FLOOR = 60
@@ -28,3 +30,16 @@ def cable_box(mask, margin):
         return None
     return np.s_[max(rows[0] - margin, 0):rows[-1] + margin + 1,
                  max(cols[0] - margin, 0):cols[-1] + margin + 1]
+
+
+def sample_at(image, xs, ys):
+    """Values (float32) of ``image`` (one or three channels) at points ``(xs, ys)`` of any
+    shape, bilinear; shape ``xs.shape`` (+ ``(3,)``)."""
+    shape, count, width = np.shape(xs), np.size(xs), 4096
+    pad = -count % width
+    grid = [np.concatenate([np.ravel(v).astype(np.float32), np.zeros(pad, np.float32)])
+            .reshape(-1, width) for v in (xs, ys)]
+    values = cv2.remap(image, grid[0], grid[1], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+    channels = image.shape[2:]
+    return values.reshape(-1, *channels)[:count].reshape(*shape, *channels).astype(np.float32)

@@ -9,7 +9,9 @@ sure pixels, and likely ones right beside them (a shade side, a strand darkened 
 Specks are removed, the side of the cable its colours missed is put back by the cable's shape
 (:mod:`engine.stages.missing_side`), pieces shaped like objects rather than cable are removed,
 the desaturated specular streak along a glossy cable is filled back in, the outline is refined
-along its normal (:func:`refine_edges`), and the cable's width in pixels is measured per frame.
+along its normal (:func:`refine_edges`), the pixels near it are decided again by a classifier
+learnt on synthetic looks (:mod:`engine.stages.outline`), and the cable's width in pixels is
+measured per frame.
 
 Junctions are where the cable overlaps itself: forks of the mask's skeleton where a disc holds
 more cable than a single strand can (:func:`junction_centres`). Every length is derived from
@@ -30,10 +32,12 @@ from .colour_model import (_HUE_APART, _HUED, ColourModel, _hue_gap, find_cable,
                            opened, range_of, reduced, thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .missing_side import with_missing_side
+from .outline import classify_outline
 from .pixels import CHROMA_FLOOR as _CHROMA_FLOOR
 from .pixels import brightness as _brightness
 from .pixels import cable_box as _cable_box
 from .pixels import chroma as _chroma
+from .pixels import sample_at
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
 from .union_find import DisjointSets
 
@@ -152,6 +156,10 @@ class SegmentationSettings:
         by more than ``side_chroma`` in chromaticity and ``side_contrast`` in colour, in
         pieces that run along the mask for at least ``side_contact`` cable widths;
         ``side_reach`` 0 turns it off. Not with ``all_cables``.
+    outline_passes : int
+        The pixels within two pixels of the mask's outline are decided by a classifier learnt
+        on synthetic looks (:mod:`engine.stages.outline`), this many times, each around the
+        last outline; 0 keeps the refined outline.
     """
 
     speck_area: float = setting(3.0, low=0, unit="widths²")
@@ -185,6 +193,7 @@ class SegmentationSettings:
     side_chroma: float = setting(0.02, low=0)
     side_contrast: float = setting(20.0, low=0, unit="levels")
     side_contact: float = setting(2.0, low=0, unit="widths")
+    outline_passes: int = setting(2, low=0)
     all_cables: bool = False
 
     def __post_init__(self):
@@ -799,7 +808,11 @@ def _cable_masks(image_rgb, colour, settings, model=None):
     colour_range_mask = mask.copy()
     colour_range_mask[box] = plain
     mask[box] = refined
-    return mask, colour_range_mask, cable_width(refined)
+    width = cable_width(refined)
+    if settings.outline_passes > 0:
+        mask = classify_outline(mask, image_rgb, width, passes=settings.outline_passes)
+        width = cable_width(mask)
+    return mask, colour_range_mask, width
 
 
 def _several_masks(image_rgb, several, settings):
@@ -867,19 +880,6 @@ def _refine_edges(mask, image_rgb, settings):
     """:func:`refine_edges` with the settings' reach and contrast."""
     return refine_edges(mask, image_rgb, reach=settings.edge_reach,
                         contrast=settings.edge_contrast)
-
-
-def _sample(image, xs, ys):
-    """Values (float32) of ``image`` (one or three channels) at points ``(xs, ys)`` of any
-    shape, bilinear; shape ``xs.shape`` (+ ``(3,)``)."""
-    shape, count, width = np.shape(xs), np.size(xs), 4096
-    pad = -count % width
-    grid = [np.concatenate([np.ravel(v).astype(np.float32), np.zeros(pad, np.float32)])
-            .reshape(-1, width) for v in (xs, ys)]
-    values = cv2.remap(image, grid[0], grid[1], cv2.INTER_LINEAR,
-                       borderMode=cv2.BORDER_REPLICATE)
-    channels = image.shape[2:]
-    return values.reshape(-1, *channels)[:count].reshape(*shape, *channels).astype(np.float32)
 
 
 def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
@@ -951,8 +951,8 @@ def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
     colourless = np.linalg.norm(across) < 0.05
     steps = np.arange(-reach - 1, reach + 2, dtype=np.float32)
     x, y = cols.astype(np.float32)[:, None], rows.astype(np.float32)[:, None]
-    red, green, blue = np.moveaxis(_sample(image, x + steps * nx[:, None],
-                                           y + steps * ny[:, None]), -1, 0)
+    red, green, blue = np.moveaxis(sample_at(image, x + steps * nx[:, None],
+                                              y + steps * ny[:, None]), -1, 0)
     if colourless:  # the colour itself
         across = cable_colour - background_colour
     level = across[0] * red + across[1] * green + across[2] * blue
@@ -967,8 +967,8 @@ def refine_edges(mask, image_rgb, *, reach=2, contrast=20.0):
     edge = steps[1:-1][peak] + offset
     # 2. half cable, half background
     ends = np.stack([edge - 1.5, edge + 1.5], axis=1)
-    inside, outside = np.moveaxis(_sample(image, x + ends * nx[:, None],
-                                          y + ends * ny[:, None]), 1, 0)
+    inside, outside = np.moveaxis(sample_at(image, x + ends * nx[:, None],
+                                             y + ends * ny[:, None]), 1, 0)
     across = inside - outside
     spread = np.einsum("ij,ij->i", across, across)
     share = np.einsum("ij,ij->i", image.reshape(-1, 3)[flat].astype(np.float32) - outside,
