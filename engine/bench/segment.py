@@ -110,13 +110,13 @@ def bench_segment(*, sample=DEFAULT_SAMPLE, views=30, seeds=3, settings=Segmenta
     renders with 3, 6 and 12 crossings, a knot and a hanging cable at 960x720, and the
     3-crossing scene at 1280x720 for the speed target; with more than one seed, each family's
     rows are followed by their mean and worst (the worst IoU and recall the smallest, the
-    worst stray share and time the largest). ``ms_per_frame`` is the segmentation and junction
-    map alone (``edge_reach=0``), ``ms_with_edges`` with the outline's refinement (every
-    default), ``ms_without_side`` every default but the missing side's search
-    (``side_reach=0``), ``ms_without_outline`` every default but the outline's classifier
-    (``outline_passes=0``); each the fastest of three passes over the frames, the four timed
-    one after the other on the same frames (on a busy machine only their differences say
-    much).
+    worst stray share and time the largest). ``ms_per_frame`` is every default but the
+    outline's refinement (``edge_reach=0``; the outline's classifier runs),
+    ``ms_with_edges`` every default, ``ms_without_side`` every default but the missing side's
+    search (``side_reach=0``), ``ms_without_outline`` every default but the outline's
+    classifier (``outline_passes=0``); each the fastest of three passes over the frames, the
+    four timed one after the other on the same frames (on a busy machine only their
+    differences say much).
     """
     import cv2
 

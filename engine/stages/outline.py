@@ -80,13 +80,14 @@ class OutlineClassifier:
         object.__setattr__(self, "_folded", folded)
         object.__setattr__(self, "_folded_bias", np.asarray(self.hidden_bias, np.float64)
                            - np.asarray(self.mean, np.float64) @ folded)
+        object.__setattr__(self, "_output", np.asarray(self.output, np.float64))
 
     def logits(self, features):
         """The log-odds of cable for each row of ``features`` (shape (N, F)), in float64: a
         pixel's label must not depend on the BLAS's rounding (the Blender lines' numpy and
         OpenBLAS differ, and their curves are compared to 1e-6 r)."""
         units = np.tanh(np.asarray(features, np.float64) @ self._folded + self._folded_bias)
-        return units @ np.asarray(self.output, np.float64) + self.output_bias
+        return units @ self._output + self.output_bias
 
     def to_dict(self):
         """The weights as plain lists (the JSON file's content)."""
