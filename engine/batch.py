@@ -34,7 +34,7 @@ from .io.files import check_writable, write_atomic
 from .io.image_sequence import VIDEO_SUFFIXES, frame_files
 from .threads import MOST_THREADS, cpu_count
 
-__all__ = ["BATCH_FORMAT", "RUN_FILE", "SUMMARY", "Sequence", "SequenceOutcome",
+__all__ = ["BATCH_FORMAT", "RUN_FILE", "SUMMARY", "STOP_ON_SIGINT", "Sequence", "SequenceOutcome",
            "engine_command", "find_sequences", "run_batch", "sequence_outputs", "batch_exit_code",
            "summary_table"]
 
@@ -52,6 +52,10 @@ _PROGRESS = re.compile(r"^\[[#.]*\]\s*(\d+)% ?(.*)$")
 _POLL = 0.1
 #: How long a stopped run may take to clean up (its temporary files) before it is killed.
 _GRACE = 5.0
+#: Set (to "1") in the environment of the runs a batch starts: a run stops on SIGINT even when
+#: it inherited an ignored one (a batch started in the background by a shell script ignores
+#: SIGINT, and so would its runs, which the cancel stops with one).
+STOP_ON_SIGINT = "CABLE_RECON_STOP_ON_SIGINT"
 #: What a summary row says of folders it cannot know (a result made outside this batch).
 _UNKNOWN = "(unknown)"
 #: The exit codes a run ends with (any other is a crash: counted as a bug, 4).
@@ -170,11 +174,12 @@ def find_sequences(folder):
 def engine_command():
     """``python -m engine`` as a child process runs it, and the environment it needs: the
     engine's parent folder and this process's import path (in Blender: the extension's
-    wheels) on its path."""
+    wheels) on its path, and :data:`STOP_ON_SIGINT`."""
     package_root = Path(__file__).resolve().parent
     paths = [str(package_root.parent), *(p for p in sys.path if p)]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(paths))
     env["PYTHONIOENCODING"] = "utf-8"  # the log is read as UTF-8 on every system
+    env[STOP_ON_SIGINT] = "1"
     # -P: the working folder is not searched first (a folder there named engine, or numpy)
     return [sys.executable, "-P", "-m", package_root.name], env
 

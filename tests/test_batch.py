@@ -3,6 +3,7 @@
 import json
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import threading
@@ -129,7 +130,19 @@ def test_bad_batch_input_is_one_line(sequences, tmp_path):
     assert (tmp_path / "mine" / "summary.json").read_text() == "{}"
 
 
-def test_a_cancelled_batch_stops_its_runs_and_leaves_no_result(sequences, tmp_path):
+@pytest.mark.parametrize("sigint", ["handled", "ignored"])
+def test_a_cancelled_batch_stops_its_runs_and_leaves_no_result(sequences, tmp_path, sigint):
+    # "ignored": the batch was started in the background by a shell script, so it and the
+    # runs it starts inherit an ignored SIGINT; the cancel must stop them all the same
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN if sigint == "ignored"
+                           else signal.default_int_handler)
+    try:
+        _cancel_a_batch(sequences, tmp_path)
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def _cancel_a_batch(sequences, tmp_path):
     cancel = threading.Event()
     started = set()
 

@@ -9,12 +9,15 @@ import importlib
 import importlib.util
 import logging
 import os
+import signal
 import sys
 import tempfile
+import threading
 import traceback
 from pathlib import Path
 
 from .. import __version__
+from ..batch import STOP_ON_SIGINT
 from ..errors import Cancelled, InputError, ReconstructionError
 from .settings import (PIPELINE_GROUPS, add_pipeline_arguments, checked_type,
                        pipeline_from_arguments)
@@ -366,6 +369,7 @@ def _developer_bench():
 
 def main(argv=None):
     """Run the command line; returns the exit code."""
+    _stop_on_sigint()
     parser = build_parser()
     args = parser.parse_args(argv)
     handler = logging.StreamHandler(sys.stderr)
@@ -380,6 +384,14 @@ def main(argv=None):
         return run_with_exit_code(args.run, args, debug=args.debug)
     finally:
         package_log.removeHandler(handler)
+
+
+def _stop_on_sigint():
+    """A run a batch started stops on SIGINT, as a cancel asks, even if it inherited an
+    ignored one (Python then never raises KeyboardInterrupt): the default handler back."""
+    if (os.environ.get(STOP_ON_SIGINT) == "1" and threading.current_thread() is
+            threading.main_thread() and signal.getsignal(signal.SIGINT) is signal.SIG_IGN):
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def run_with_exit_code(run, *args, stream=None, debug=False):
