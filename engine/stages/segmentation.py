@@ -4,8 +4,10 @@ The paper thresholds an HSV range set on one frame. Here the range (set by hand,
 found automatically: :func:`engine.stages.colour_model.find_cable` picks the most cable-like group
 of colour clusters, not the most saturated colour) only seeds a colour model of the cable against
 the background learnt on a few frames of the sequence (:func:`sequence_colour`,
-:class:`engine.stages.colour_model.ColourModel`). Each frame's pixels are classified by that model:
-sure pixels, and likely ones right beside them (a shade side, a strand darkened under another).
+:class:`engine.stages.colour_model.ColourModel`; a striped cable's second colour, found in the
+gaps between its first colour's bands, joins the seed: :mod:`engine.stages.stripes`). Each
+frame's pixels are classified by that model: sure pixels, and likely ones right beside them (a
+shade side, a strand darkened under another).
 Specks are removed, the side of the cable its colours missed is put back by the cable's shape
 (:mod:`engine.stages.missing_side`), pieces shaped like objects rather than cable are removed,
 the desaturated specular streak along a glossy cable is filled back in, the outline is refined
@@ -39,6 +41,7 @@ from .pixels import cable_box as _cable_box
 from .pixels import chroma as _chroma
 from .pixels import sample_at
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
+from .stripes import with_second_colour
 from .union_find import DisjointSets
 
 #: :func:`_shade_side` compares the shade side with the pixels up to this many pixels beyond it.
@@ -139,6 +142,10 @@ class SegmentationSettings:
         miss (shading darkens a colour, it keeps its chromaticity). A cable whose
         chromaticity is within twice ``seed_shade_chroma`` of its surroundings' counts as
         colourless: neither this nor ``shade_chroma`` applies.
+    stripe_reach : float
+        The gaps between a striped cable's bands, up to twice this many cable widths long,
+        are looked at for its second colour, which the model then learns as the cable's
+        (:mod:`engine.stages.stripes`); 0 turns this off.
     all_cables : bool
         Find every cable of its own colour, not only the most cable-like thing (automatic
         colour only): each cable is segmented with its own colour model and the masks are
@@ -187,6 +194,7 @@ class SegmentationSettings:
     shade_reach: float = setting(0.75, low=0, unit="widths")
     seed_shade_reach: float = setting(0.8, low=0, unit="widths")
     seed_shade_chroma: float = setting(0.03, low=0)
+    stripe_reach: float = setting(1.5, low=0, unit="widths")
     shadow_chroma: float = setting(0.02, low=0)
     shadow_depth: float = setting(1.5, low=0)
     side_reach: float = setting(1.1, low=0, unit="widths")
@@ -552,6 +560,7 @@ def _model_of(images_rgb, seeds, settings):
     """:func:`learn_colour_model` from the frames' :func:`colour_seed` results."""
     if not any(seed.any() for seed, _, _ in seeds):
         return None
+    seeds = with_second_colour(images_rgb, seeds, settings.stripe_reach)
     try:
         return ColourModel.learn(images_rgb, [seed for seed, _, _ in seeds],
                                  widths=[width for _, _, width in seeds],

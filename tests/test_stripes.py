@@ -1,0 +1,107 @@
+"""A striped cable's second colour learnt from the gaps between its bands
+(engine.stages.stripes), and never a plain cable's table or a shadow."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from engine.stages.segmentation import (SegmentationSettings, cable_width, segment_frame,
+                                        sequence_colour)
+from engine.stages.stripes import gap_pixels, with_second_colour
+from engine.synthetic.scene import look_scene
+
+TABLE = (70, 95, 90)  # a dark teal table
+FIRST, SECOND = (40, 60, 210), (215, 200, 150)  # blue bands, beige gaps
+
+
+def curve(shape, phase=0.0, offset=0.0, width=10.0):
+    """A wavy cable across the frame: pixels within ``width / 2`` of
+    y = centre + offset + 60 sin(x / 70 + phase), and the position along it (pixels of x)."""
+    rows, cols = np.mgrid[:shape[0], :shape[1]].astype(float)
+    middle = shape[0] / 2 + offset + 60.0 * np.sin(cols / 70.0 + phase)
+    slope = 60.0 / 70.0 * np.cos(cols / 70.0 + phase)
+    inside = np.abs(rows - middle) / np.sqrt(1.0 + slope**2) < width / 2
+    inside &= (cols >= 20) & (cols < shape[1] - 20)
+    # arc length along the curve, so the bands are as long on the slopes as on the crests
+    length = np.cumsum(np.sqrt(1.0 + slope[0] ** 2))
+    return inside, np.broadcast_to(length, shape)
+
+
+def table(seed, shape=(360, 640)):
+    noise = np.random.default_rng(seed).normal(0.0, 5.0, shape + (3,))
+    return np.clip(np.array(TABLE, float) + noise, 0, 255).astype(np.uint8)
+
+
+def striped(seed, period=30.0, gap_colour=SECOND):
+    """A frame of a cable striped every ``period`` pixels (half of them ``gap_colour``), its
+    mask and the mask of its first colour."""
+    image = table(seed)
+    cable, along = curve(image.shape[:2], phase=0.4 * seed)
+    first = cable & ((along % period) < period / 2)
+    image[first] = FIRST
+    image[cable & ~first] = gap_colour
+    return image, cable, first
+
+
+def seeds_of(masks):
+    return [(mask, np.zeros_like(mask), cable_width(mask)) for mask in masks]
+
+
+def test_the_gaps_between_the_bands_are_found_away_from_their_outlines():
+    image, cable, first = striped(0)
+    gaps, beside, background = gap_pixels(first, cable_width(first), 1.5)
+    assert gaps.sum() > 0.2 * (cable & ~first).sum()  # the middle of each gap
+    assert not (gaps & ~(cable & ~first)).any()  # nothing but the gaps
+    assert not (background & cable).any()
+    assert (beside >= gaps).all() and not (beside & first).any()
+    assert (beside & cable & ~first).sum() > 0.6 * (cable & ~first).sum()
+
+
+def test_a_striped_cables_second_colour_joins_its_seed():
+    frames = [striped(seed) for seed in range(3)]
+    seeds = seeds_of([first for _, _, first in frames])
+    grown = with_second_colour([image for image, _, _ in frames], seeds, 1.5)
+    for (image, cable, first), (seed, _, _) in zip(frames, grown):
+        added = seed & ~first
+        assert added.sum() > 0.6 * (cable & ~first).sum()  # all but the mixed pixels
+        assert not (added & ~cable).any()  # of the cable's second colour only
+    # off: the seeds as they were
+    assert with_second_colour([image for image, _, _ in frames], seeds, 0.0) == seeds
+
+
+def test_a_striped_cable_is_segmented_whole():
+    # a tuning look: blue and beige bands, each two widths long, on a dark printed table
+    scene = look_scene("patterned", 7, views=4, width=640, height=480)
+    images, truth = list(scene.images), scene.masks[3]
+    ious = {}
+    for reach in (0.0, SegmentationSettings().stripe_reach):
+        settings = replace(SegmentationSettings(), stripe_reach=reach)
+        colour, model = sequence_colour(images[:3], None, settings)
+        mask = segment_frame(images[3], colour, settings, model=model).mask  # not learnt on
+        ious[reach] = (mask & truth).sum() / (mask | truth).sum()
+    assert ious[0.0] < 0.5  # the blue bands
+    assert ious[SegmentationSettings().stripe_reach] > 0.75
+
+
+@pytest.mark.parametrize("case", ["close strands", "shadow in the gaps"])
+def test_no_second_colour_where_there_is_none(case):
+    frames, seeds = [], []
+    for seed in range(3):
+        if case == "close strands":
+            # a plain cable doubled back on itself: the closing fills the table between
+            image = table(seed)
+            one, _ = curve(image.shape[:2], phase=0.4 * seed)
+            two, _ = curve(image.shape[:2], phase=0.4 * seed, offset=16.0)
+            cable = one | two
+            image[cable] = FIRST
+        else:
+            # dashes whose gaps are the table in shadow (its colour, darker)
+            shade = tuple(int(0.5 * c) for c in TABLE)
+            image, _, cable = striped(seed, gap_colour=shade)
+        frames.append(image)
+        seeds.append(cable)
+    seeds = seeds_of(seeds)
+    grown = with_second_colour(frames, seeds, 1.5)
+    assert all(a is b for (a, _, _), (b, _, _) in zip(grown, seeds))
+
