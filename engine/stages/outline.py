@@ -135,10 +135,11 @@ def _window_sums(image, where, window, flat):
     """Sums of the colours of ``where``'s pixels (``image`` uint8) in a ``window``-wide square
     around the pixels ``flat``, and how many they are (float32, exact: integer sums)."""
     weight = where.view(np.uint8)
-    masked = cv2.bitwise_and(image, image, mask=weight)
-    total = cv2.boxFilter(masked, cv2.CV_32F, (window, window), normalize=False)
-    count = cv2.boxFilter(weight, cv2.CV_32F, (window, window), normalize=False)
-    return total.reshape(-1, 3)[flat], count.ravel()[flat]
+    # colours and count as the four channels of one image: one filter, not two
+    four = cv2.merge([*cv2.split(cv2.bitwise_and(image, image, mask=weight)), weight])
+    total = cv2.boxFilter(four, cv2.CV_32F, (window, window), normalize=False)
+    total = total.reshape(-1, 4)[flat]
+    return total[:, :3], total[:, 3]
 
 
 def _mean(total, count):
@@ -213,8 +214,10 @@ def _colours_around(cable, image, inner, outer, flat, width, window):
                               borderValue=0) > 0)
     beyond = outer & (cv2.dilate(cable, _disc(REACH + width // 2)) > 0)
     rim_total, rim_count = _window_sums(image, rim, window, flat)
-    cable_colour = np.where((rim_count > 0)[:, None], _mean(rim_total, rim_count),
-                            _mean(*_window_sums(image, inner, window, flat)))
+    cable_colour = _mean(rim_total, rim_count)
+    alone = rim_count == 0
+    if alone.any():  # the inside's sums only where they are needed (rarely)
+        cable_colour[alone] = _mean(*_window_sums(image, inner, window, flat[alone]))
     return cable_colour, _mean(*_window_sums(image, beyond, window, flat))
 
 
@@ -223,7 +226,9 @@ def _profile_features(profile, cable_colour, background):
     the colour axis from the background (0) to the cable (1), off it, along the chromaticity
     axis, brightness against the background's, distance from the cable's and the background's
     colours (in lengths of the axis)."""
-    red, green, blue = (profile[..., c] for c in range(3))
+    # each channel as a plane of its own: arithmetic on contiguous arrays is several times faster
+    red, green, blue = np.ascontiguousarray(np.moveaxis(profile, -1, 0))
+    plain_total = red + green + blue
     axis = cable_colour - background
     contrast = np.maximum(np.einsum("ij,ij->i", axis, axis), _LEAST_CONTRAST)[:, None]
     length = np.sqrt(contrast)
@@ -235,7 +240,7 @@ def _profile_features(profile, cable_colour, background):
     from_cable = np.sqrt(sum((channel - cable_colour[:, c, None]) ** 2
                              for c, channel in enumerate((red, green, blue)))) / length
     # a dark pixel's chromaticity is noise: below CHROMA_FLOOR it is shrunk towards nothing
-    total = np.maximum(red + green + blue, CHROMA_FLOOR)
+    total = np.maximum(plain_total, CHROMA_FLOOR)
     background_total = np.maximum(background.sum(axis=1), CHROMA_FLOOR)[:, None]
     chroma_axis = cable_colour / np.maximum(cable_colour.sum(axis=1), CHROMA_FLOOR)[:, None] \
         - background / background_total
@@ -244,7 +249,7 @@ def _profile_features(profile, cable_colour, background):
     chroma_along = sum((channel / total - background[:, c, None] / background_total)
                        * chroma_axis[:, c, None]
                        for c, channel in enumerate((red, green, blue))) / chroma_contrast
-    brightness = (red + green + blue) / background_total
+    brightness = plain_total / background_total
     return (np.clip(along, -3, 4), np.clip(off, 0, 4), np.clip(chroma_along, -3, 4),
             np.clip(brightness, 0, 4), np.clip(from_cable, 0, 4), np.clip(from_background, 0, 4))
 
