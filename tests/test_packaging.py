@@ -160,3 +160,15 @@ def test_installed_through_blenders_installer(linux_zip, tmp_path):
     assert curve["crossings"] == len(api.crossings) == 1
     assert report["batch_exit"] == 0 and report["batch_objects"] == ["loop"]
     assert report["batch_folder_exit"] == 0 and report["batch_folder"] == ["loop.blend"]
+
+
+def test_loading_the_checkout_as_the_package_leaves_no_folder_behind():
+    # tests and tools link the checkout into a temporary folder; a run must not leave it
+    script = ("from pathlib import Path; from blender_package import load_addon_package; "
+              "print(Path(load_addon_package().__file__).parent.parent)")
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT / "tools")})
+    assert run.returncode == 0, run.stderr
+    link_dir = Path(run.stdout.strip().splitlines()[-1])
+    assert link_dir.name.startswith("cable_recon_pkg_") and not link_dir.exists()
+    assert (ROOT / "engine").is_dir()  # the link went, not what it points to

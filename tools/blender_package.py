@@ -4,6 +4,7 @@ Inside Blender the extension is the package ``bl_ext.<repo>.cable_reconstruction
 checkout is linked as a top-level package of the same name so its relative imports resolve.
 """
 
+import atexit
 import importlib
 import os
 import sys
@@ -19,6 +20,17 @@ def load_addon_package():
     if PACKAGE in sys.modules:
         return sys.modules[PACKAGE]
     link_dir = Path(tempfile.mkdtemp(prefix="cable_recon_pkg_"))
-    os.symlink(ROOT, link_dir / PACKAGE, target_is_directory=True)
+    link = link_dir / PACKAGE
+    os.symlink(ROOT, link, target_is_directory=True)
+    atexit.register(_remove_link, link)
     sys.path.insert(0, str(link_dir))
     return importlib.import_module(PACKAGE)
+
+
+def _remove_link(link):
+    """Remove the link (not what it points to) and its temporary folder at exit."""
+    link.unlink(missing_ok=True)
+    try:
+        link.parent.rmdir()
+    except OSError:  # something else was put there: leave it
+        pass
