@@ -237,6 +237,20 @@ def test_a_cable_like_a_shadow_keeps_every_pixel(table, cable_colour, shadow):
         0.99 * cable.sum()
 
 
+def test_a_bright_cable_s_hard_shadow_darker_than_it_is_not_cable():
+    """Under a low hard sun a bright green cable casts a shadow darker than itself (so the
+    mask's darkest quarter is the shadow, not the cable), tinted a little by the blue sky
+    light: it still leaves the mask, and the cable stays whole."""
+    from engine.stages.segmentation import SegmentationSettings, _without_shadow
+
+    for seed in range(3):
+        image, cable, dark = _cable_with_shadow(seed, cable_colour=(60, 190, 70), shadow=0.3)
+        image[dark] = np.clip(image[dark] * np.array([0.95, 1.0, 1.15]), 0, 255)
+        kept = _without_shadow(cable | dark, image, 18.0, SegmentationSettings())
+        assert (kept & cable).sum() >= 0.97 * cable.sum()
+        assert (kept & dark).sum() <= 0.1 * dark.sum()
+
+
 def test_a_model_learnt_from_given_masks_segments_the_other_frames():
     from engine.stages.segmentation import colour_from_masks
 

@@ -47,6 +47,13 @@ from .union_find import DisjointSets
 #: :func:`_shade_side` compares the shade side with the pixels up to this many pixels beyond it.
 _AROUND = 2.5
 
+#: :func:`_without_shadow`: a mask is of a cable with a colour of its own when this share of
+#: its pixels are farther than ``_COLOURED`` times ``shadow_chroma`` from the background's
+#: chromaticity (and more saturated); a pixel of such a mask darker than the background is
+#: shadow when nearer the background's chromaticity than ``_SHADOW_GAP`` times the cable's
+#: (median) distance from it.
+_COLOURED, _COLOURED_SHARE, _SHADOW_GAP = 3.0, 0.25, 1.0 / 3.0
+
 #: :func:`refine_edges` takes the cable's and the background's colours from every this many
 #: of their pixels.
 _EDGE_SAMPLE = 7
@@ -155,7 +162,11 @@ class SegmentationSettings:
         the local background's chromaticity (within ``shadow_chroma``), darker than it, and
         lighter than the cable: its share of the background's brightness over
         ``shadow_depth`` times that of the mask's darkest quarter (:func:`_without_shadow`);
-        ``shadow_chroma`` 0 keeps every pixel.
+        ``shadow_chroma`` 0 keeps every pixel. Of a cable with a colour of its own (a
+        quarter of its pixels over ``3 * shadow_chroma`` from the background's
+        chromaticity, and more saturated), a shadow may be darker than the cable, and
+        nearer the background's chromaticity than a third of the cable's distance from it
+        is enough.
     side_reach, side_chroma, side_contrast, side_contact : float
         The side of the cable its colours missed is put back
         (:func:`engine.stages.missing_side.with_missing_side`): pixels within ``side_reach``
@@ -646,6 +657,15 @@ def _without_shadow(mask, image_rgb, width, settings):
     of the background's chromaticity and about as dark as a shadow (a grey cable on a grey
     table) keeps every pixel; a pixel too dark for a chromaticity is kept too. ``width``: the
     mask's width in pixels, which sizes the background's ring and neighbourhood.
+
+    A cable with a colour of its own (at least :data:`_COLOURED_SHARE` of the mask's pixels
+    farther than :data:`_COLOURED` times ``shadow_chroma`` from the background's chromaticity
+    and farther from grey's than it; :func:`_shadow_rule`) is told from a shadow by
+    chromaticity alone: under a hard light its shadow is darker than the cable, and light
+    from the sky tints it, so a darker pixel than the background is shadow when nearer the
+    background's chromaticity than :data:`_SHADOW_GAP` times the cable's median distance from
+    it (and at least ``shadow_chroma``), decided pixel by pixel at full size where a
+    half-size pixel may hold both.
     """
     box = _cable_box(mask, int(math.ceil(3 * width)) + 2)
     if box is None or width == 0:
@@ -670,25 +690,60 @@ def _without_shadow(mask, image_rgb, width, settings):
     pixels, behind = image[rows, cols], total[rows, cols] / weight[rows, cols, None]
     brightness = _brightness(pixels)
     share = brightness / np.maximum(_brightness(behind), 1.0)
-    lightest = settings.shadow_depth * np.percentile(share, 25)  # the cable is darker
-    dark = (brightness >= _CHROMA_FLOOR) & (share < 1.0) & (share > lightest)
+    lit = brightness >= _CHROMA_FLOOR
+    offset, lightest, reach, own_colour = _shadow_rule(pixels, behind, share, lit, settings)
+    dark = lit & (share < 1.0) & (share > lightest)
     rows, cols = rows[dark], cols[dark]
-    shade = np.linalg.norm(_chroma(pixels[dark]) - _chroma(behind[dark]), axis=-1) \
-        < settings.shadow_chroma
+    shade = offset[dark] < reach
     if not shade.any():
         return mask
     shadow = np.zeros(small.shape, dtype=bool)
     shadow[rows[shade], cols[shade]] = True
-    # full size: of a half-size pixel on the cable's outline, only its lighter pixels go
+    if own_colour:  # a half-size pixel on the shadow's outline may hold cable and shadow
+        shadow = cv2.dilate(shadow.view(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    # full size: of a half-size pixel on the cable's outline, only its lighter pixels go (of
+    # a cable of its own colour, only its pixels of the background's chromaticity)
     shadow = shadow.repeat(2, axis=0).repeat(2, axis=1)
     shadow = np.pad(shadow, [(0, n - m) for n, m in zip(cable.shape, shadow.shape)], "edge")
     rows, cols = np.nonzero(cable & shadow)
     at = (np.minimum(rows // 2, size[1] - 1), np.minimum(cols // 2, size[0] - 1))
-    bright = _brightness(image_rgb[box][rows, cols])
-    light = bright > lightest * _brightness(total[at]) / weight[at]
+    pixels = image_rgb[box][rows, cols]
+    behind = total[at] / np.maximum(weight[at], 1e-3)[:, None]
+    if own_colour:
+        gone = (_brightness(pixels) < _brightness(behind)) \
+            & (np.linalg.norm(_chroma(pixels) - _chroma(behind), axis=-1) < reach)
+    else:
+        gone = _brightness(pixels) > lightest * _brightness(behind)
     kept = mask.copy()
-    kept[box][rows[light], cols[light]] = False
+    kept[box][rows[gone], cols[gone]] = False
     return kept
+
+
+def _shadow_rule(pixels, behind, share, lit, settings):
+    """:func:`_without_shadow`'s rule for a mask's ``pixels`` (float32 RGB) with the
+    background ``behind`` them, their brightness as a ``share`` of its and whether they are
+    ``lit`` enough to have a chromaticity: ``(offset, lightest, reach, own_colour)``, each
+    pixel's chromaticity's distance from the background's, the least share of a shadow's
+    pixel, the greatest offset, and whether the cable has a colour of its own."""
+    pixel_chroma, behind_chroma = _chroma(pixels), _chroma(behind)
+    offset = np.linalg.norm(pixel_chroma - behind_chroma, axis=-1)
+    # of a colour of its own: far from the background's chromaticity and more saturated (a
+    # black cable on a tinted table is far from its chromaticity too)
+    coloured = lit & (offset > _COLOURED * settings.shadow_chroma) \
+        & (_saturation(pixel_chroma) > _saturation(behind_chroma))
+    if np.count_nonzero(coloured) >= _COLOURED_SHARE * len(share):
+        # what is nearer the background's chromaticity is not cable, however dark (a hard
+        # shadow is darker than a bright cable)
+        return offset, 0.0, max(settings.shadow_chroma,
+                                _SHADOW_GAP * float(np.median(offset[coloured]))), True
+    # the cable is darker than its shadow
+    return (offset, settings.shadow_depth * np.percentile(share, 25), settings.shadow_chroma,
+            False)
+
+
+def _saturation(chroma):
+    """A chromaticity's distance from grey's."""
+    return np.linalg.norm(chroma - np.float32(1.0 / 3.0), axis=-1)
 
 
 def _chroma_gap(cable, surroundings):
