@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from engine import InputError
@@ -122,6 +122,8 @@ TOKENS = st.sampled_from(["1", "0", "-1", "2", "1e9", "nan", "inf", "PINHOLE", "
 @SLOW
 @given(file=st.sampled_from(["cameras.txt", "images.txt"]), line=st.integers(0, 8),
        tokens=st.lists(TOKENS, max_size=12))
+# found by this test: pycolmap's reader raised IndexError ("unordered_map::at")
+@example(file="images.txt", line=0, tokens=["0.5", "1", "1", "1", "1", "1", "1", "1"])
 def test_any_line_of_a_colmap_model_replaced_reads_or_is_an_input_error(tmp_path, file, line,
                                                                         tokens):
     folder, files = _model_lines(tmp_path)

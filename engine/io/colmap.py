@@ -112,6 +112,11 @@ def read_colmap_model(folder):
         raise InputError(
             f"COLMAP model in {folder} is malformed: {_clean_colmap_message(error)}"
         ) from None
+    except (IndexError, KeyError):  # pycolmap's std::out_of_range ("unordered_map::at")
+        raise InputError(
+            f"COLMAP model in {folder} is malformed: a line is cut short or refers to a "
+            "camera, image or point that the model does not hold"
+        ) from None
     cameras = []
     for image in reconstruction.images.values():
         if not image.has_pose:
