@@ -292,3 +292,48 @@ def test_the_looks_bench_s_oracle_seed_is_labelled_and_only_where_it_applies():
     assert _oracle_mean([scored, scored]) == f"{np.mean(scored['oracle']):.3f}"
     assert _oracle_mean([scored, several]).endswith(" (1)")
     assert _oracle_mean([several]) == ""
+
+
+
+class _FixedModel:
+    """A colour model whose probabilities are given (0 to 255), whatever the frame."""
+
+    def __init__(self, probability):
+        self.level, self._probability = None, probability
+
+    def probability(self, image_rgb):
+        return self._probability
+
+
+@pytest.mark.parametrize("on_cable, level", [(80, 0.3), (200, 0.5)])
+def test_the_level_is_lowered_only_where_it_tells_the_samples_apart_better(on_cable, level):
+    """A band of cable samples at a probability of 80/255 over a background at 20: only a
+    level of 0.3 (77) or lower finds them, and 0.3 is the highest that does. At 200 the
+    settings' level (0.5) finds them already and stays."""
+    from engine.stages.segmentation import SegmentationSettings, calibrated_level
+
+    probability = np.full((120, 160), 20, np.uint8)
+    seed = np.zeros(probability.shape, bool)
+    seed[50:62, 10:150] = True
+    probability[seed] = on_cable
+    seeds = [(seed, np.zeros_like(seed), 12.0)]
+    model, image = _FixedModel(probability), np.zeros((*probability.shape, 3), np.uint8)
+    assert calibrated_level(model, [image], seeds) == pytest.approx(level)
+    # never below probability_least: none of 0.5, 0.45 and 0.4 is better than another
+    assert calibrated_level(model, [image], seeds,
+                            SegmentationSettings(probability_least=0.4)) == pytest.approx(0.5)
+
+
+def test_a_pale_cable_whose_colours_the_background_shares_is_found_whole():
+    """A pale blue-grey cable on purple tiles (tuning look pale, seed 5): the model gives
+    its pixels a probability far below one half, though above the background's; the level
+    its own samples choose finds the cable."""
+    scene = look_scene("pale", 5, views=3, width=960, height=720)
+    colour, model = sequence_colour(list(scene.images))
+    assert model.level < 0.3
+    ious = [iou(segment_frame(frame, colour, model=model).mask, truth)
+            for frame, truth in zip(scene.images, scene.masks)]
+    model.level = None  # the settings' level, one half
+    plain = [iou(segment_frame(frame, colour, model=model).mask, truth)
+             for frame, truth in zip(scene.images, scene.masks)]
+    assert min(ious) >= 0.85 and np.mean(ious) >= np.mean(plain) + 0.15, (ious, plain)

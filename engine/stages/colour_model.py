@@ -31,7 +31,7 @@ from ..errors import ReconstructionError
 from .colour_range import ColourRange, hsv_image
 
 __all__ = ["ColourModel", "find_cable", "find_cables", "range_of", "thin_pieces", "reduced",
-           "colour_candidates", "CableCandidate", "opened"]
+           "colour_candidates", "CableCandidate", "opened", "samples"]
 
 #: Frames are clustered and scored at this size (the longer side, pixels); larger frames are
 #: also tried at twice, four times... the size, and a larger size is chosen when its best
@@ -510,25 +510,31 @@ def _histograms(images_rgb, seeds, widths, bins, others=None):
     frames: a list of ``[cable, background]``."""
     ranges = [0, 256] * 3
     counts = [[np.zeros((bins,) * 3), np.zeros((bins,) * 3)] for _ in _SPACES]
-    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     others = [None] * len(seeds) if others is None else others
     for image, seed, width, other in zip(images_rgb, seeds, widths, others):
         if not seed.any():
             continue
-        seed = seed.astype(np.uint8)
-        core = cv2.erode(seed, cross)
-        grow = max(int(math.ceil(width)), 2)
-        far = cv2.dilate(seed, cv2.getStructuringElement(
-            cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))) == 0
-        if other is not None:
-            far |= other
+        cable, far = samples(seed, width, other)
+        cable, far = cable.view(np.uint8), far.view(np.uint8)
         for space, pair in zip(_SPACES, counts):
             converted = space(image)
-            pair[0] += cv2.calcHist([converted], [0, 1, 2], core if core.any() else seed,
-                                    [bins] * 3, ranges)
-            pair[1] += cv2.calcHist([converted], [0, 1, 2], far.astype(np.uint8), [bins] * 3,
-                                    ranges)
+            pair[0] += cv2.calcHist([converted], [0, 1, 2], cable, [bins] * 3, ranges)
+            pair[1] += cv2.calcHist([converted], [0, 1, 2], far, [bins] * 3, ranges)
     return counts
+
+
+def samples(seed, width, other=None):
+    """A frame's samples of the cable (the seed's pixels but its outline, unless that is all
+    of it) and of the background (the pixels farther than ``width`` from the seed, and
+    ``other``), boolean masks."""
+    seed = np.ascontiguousarray(seed, dtype=bool).view(np.uint8)
+    core = cv2.erode(seed, cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3)))
+    grow = max(int(math.ceil(width)), 2)
+    far = cv2.dilate(seed, cv2.getStructuringElement(
+        cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))) == 0
+    if other is not None:
+        far |= other
+    return (core if core.any() else seed) > 0, far
 
 
 class ColourModel:
@@ -549,10 +555,15 @@ class ColourModel:
     ----------
     luts : list of ndarray, shape (bins, bins, bins)
         Per colour space, each bin's probability (0 to 255).
+    level : float or None
+        The probability (0 to 1) from which a pixel is the cable, when the model's own
+        samples chose one (:func:`engine.stages.segmentation.calibrated_level`); None: the
+        settings' ``probability``.
     """
 
     def __init__(self, histograms, prior, smoothing=1.0):
         self.histograms, self.prior, self.smoothing = histograms, prior, smoothing
+        self.level = None
         self.bins = histograms[0][0].shape[0]
         self.luts, self._mats = [], []
         for cable, background in histograms:

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..settings import check_settings, setting
 from .colour_model import (_HUE_APART, _HUED, ColourModel, _hue_gap, find_cable, find_cables,
-                           opened, range_of, reduced, thin_pieces)
+                           opened, range_of, reduced, samples, thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .missing_side import with_missing_side
 from .outline import classify_outline
@@ -53,6 +53,10 @@ _AROUND = 2.5
 #: shadow when nearer the background's chromaticity than ``_SHADOW_GAP`` times the cable's
 #: (median) distance from it.
 _COLOURED, _COLOURED_SHARE, _SHADOW_GAP = 3.0, 0.25, 1.0 / 3.0
+
+#: :func:`calibrated_level` tries the probabilities this far apart and takes the highest whose
+#: IoU of the samples is within ``_LEVEL_MARGIN`` of the best one's.
+_LEVEL_STEP, _LEVEL_MARGIN = 0.05, 0.01
 
 #: :func:`refine_edges` takes the cable's and the background's colours from every this many
 #: of their pixels.
@@ -124,7 +128,14 @@ class SegmentationSettings:
         Smoothing of the model's colour histograms, in bins of 8 levels: colours near the
         cable's (its shading the range missed) count as cable.
     probability : float
-        A pixel is cable when the model gives its colour at least this probability.
+        A pixel is cable when the model gives its colour at least this probability, or a
+        lower one, down to ``probability_least``, chosen on the frames the model was learnt
+        from when it tells their cable samples from their background clearly better
+        (:func:`calibrated_level`; a pale cable's colours are common in the background too,
+        so few of its pixels reach a probability of one half). ``probability_near`` is
+        lowered in proportion.
+    probability_least : float
+        See ``probability``; ``probability`` or more: the level is never lowered.
     probability_near : float
         Within ``near_reach`` cable widths of such pixels, this probability is enough, or
         being in the colour range.
@@ -196,6 +207,7 @@ class SegmentationSettings:
     model_frames: int = setting(3, low=1)
     model_smoothing: float = setting(1.0, low=0, unit="bins")
     probability: float = setting(0.5, low=0, high=1)
+    probability_least: float = setting(0.1, low=0, high=1)
     probability_near: float = setting(0.4, low=0, high=1)
     near_reach: float = setting(0.5, low=0, unit="widths")
     range_share: float = setting(3.0, low=0)
@@ -573,12 +585,67 @@ def _model_of(images_rgb, seeds, settings):
         return None
     seeds = with_second_colour(images_rgb, seeds, settings.stripe_reach)
     try:
-        return ColourModel.learn(images_rgb, [seed for seed, _, _ in seeds],
-                                 widths=[width for _, _, width in seeds],
-                                 others=[objects for _, objects, _ in seeds],
-                                 smoothing=settings.model_smoothing)
+        model = ColourModel.learn(images_rgb, [seed for seed, _, _ in seeds],
+                                  widths=[width for _, _, width in seeds],
+                                  others=[objects for _, objects, _ in seeds],
+                                  smoothing=settings.model_smoothing)
     except ValueError:
         return None
+    model.level = calibrated_level(model, images_rgb, seeds, settings)
+    return model
+
+
+def _probability(model, image_rgb):
+    """The model's probability of each pixel, 0 to 255, smoothed a little (a pixel's colour
+    is noisy; its neighbours' agree)."""
+    return cv2.GaussianBlur(model.probability(image_rgb), (3, 3), 0)
+
+
+def calibrated_level(model, images_rgb, seeds, settings=SegmentationSettings()):
+    """The probability from which ``model`` calls a pixel the cable, chosen on the frames it
+    was learnt from.
+
+    Each level from ``settings.probability`` down to ``settings.probability_least``
+    (:data:`_LEVEL_STEP` apart) is scored by how well it tells the frames' cable samples from
+    their background samples (:func:`engine.stages.colour_model.samples`): the IoU of the
+    pixels at or above it with the cable samples. The highest level within
+    :data:`_LEVEL_MARGIN` of the best score is taken: a lower level only where it is clearly
+    better (a pale cable's colours, common in the background, get a low probability).
+
+    Parameters
+    ----------
+    model : ColourModel
+    images_rgb : sequence of ndarray
+    seeds : sequence of (ndarray, ndarray, float)
+        Per frame, the cable's seed, the objects of its colour and its width
+        (:func:`colour_seed`).
+    settings : SegmentationSettings, optional
+
+    Returns
+    -------
+    float
+    """
+    top = settings.probability
+    if settings.probability_least >= top:
+        return top
+    levels = np.round(np.arange(top, settings.probability_least - 1e-6, -_LEVEL_STEP), 6)
+    steps = np.ceil(255.0 * levels)
+    found, false, cable = np.zeros(len(levels)), np.zeros(len(levels)), 0
+    for image, (seed, objects, width) in zip(images_rgb, seeds):
+        if not seed.any():
+            continue
+        inside, far = samples(seed, width, objects)
+        probability = _probability(model, image)
+        # counts at or above each level, from a histogram of the probabilities
+        counts = [np.cumsum(np.bincount(probability[where], minlength=256)[::-1])[::-1]
+                  for where in (inside, far)]
+        found += counts[0][steps.astype(int)]
+        false += counts[1][steps.astype(int)]
+        cable += np.count_nonzero(inside)
+    if cable == 0:
+        return top
+    score = found / (cable + false)
+    return float(levels[np.flatnonzero(score >= score.max() - _LEVEL_MARGIN)[0]])
 
 
 def _model_mask(image_rgb, model, settings, in_range=None):
@@ -589,10 +656,13 @@ def _model_mask(image_rgb, model, settings, in_range=None):
     only when it holds at most ``range_share`` times the sure pixels (a range around a
     striped cable holds the whole frame). The shade side beside sure pixels is likely too
     (:func:`_shade_side`)."""
-    probability = cv2.GaussianBlur(model.probability(image_rgb), (3, 3), 0)
-    sure = probability >= 255.0 * settings.probability
+    probability = _probability(model, image_rgb)
+    level = settings.probability if model.level is None else model.level
+    sure = probability >= 255.0 * level
     if not settings.probability_near < settings.probability:
         return sure, sure
+    # lowered with the level
+    near_level = settings.probability_near * level / settings.probability
     small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
                        interpolation=cv2.INTER_AREA) > 0
     # the half-size width is half the full-size width
@@ -605,7 +675,7 @@ def _model_mask(image_rgb, model, settings, in_range=None):
         return sure, sure
     distance = cv2.distanceTransform(np.ascontiguousarray(~sure[box]).view(np.uint8),
                                      cv2.DIST_L2, cv2.DIST_MASK_5)
-    likely = probability[box] >= 255.0 * settings.probability_near
+    likely = probability[box] >= 255.0 * near_level
     if in_range is not None and (np.count_nonzero(in_range)
                                  <= settings.range_share * np.count_nonzero(sure)):
         likely |= in_range[box]
