@@ -279,3 +279,18 @@ def test_junctions_at_the_crossings_of_a_scene(scene):
     assert segmentation.width == pytest.approx(
         2 * camera.focal[0] * truth.radius / np.median(camera.world_to_camera(
             truth.centreline)[:, 2]), rel=0.2)
+
+
+def test_a_crossing_thick_enough_to_be_an_object_is_not_dropped_as_one():
+    """Pieces shaped like objects leave the mask; two short strands crossing (a striped
+    cable's mask in pieces, its width underestimated) hold as wide a disc and are as short,
+    but fill only half of their convex hull: they stay, a box goes."""
+    from engine.stages.segmentation import _drop_blobs
+
+    mask = np.zeros((200, 300), np.uint8)
+    cv2.line(mask, (30, 30), (80, 80), 1, 13)
+    cv2.line(mask, (30, 80), (80, 30), 1, 13)
+    cv2.rectangle(mask, (180, 40), (215, 75), 1, -1)
+    kept = _drop_blobs(mask > 0, 5.0, SegmentationSettings())
+    assert kept[:, :120].sum() == (mask[:, :120] > 0).sum()
+    assert not kept[:, 150:].any()

@@ -58,6 +58,10 @@ _COLOURED, _COLOURED_SHARE, _SHADOW_GAP = 3.0, 0.25, 1.0 / 3.0
 #: IoU of the samples is within ``_LEVEL_MARGIN`` of the best one's.
 _LEVEL_STEP, _LEVEL_MARGIN = 0.05, 0.01
 
+#: :func:`_drop_blobs`: an object is about convex; a piece of cable thick enough to be one
+#: (where strands cross) is not: it fills less than this share of its convex hull.
+_SOLID = 0.8
+
 #: :func:`refine_edges` takes the cable's and the background's colours from every this many
 #: of their pixels.
 _EDGE_SAMPLE = 7
@@ -147,7 +151,8 @@ class SegmentationSettings:
     blob_elongation, blob_thickness : float
         Pieces of the mask less elongated than ``blob_elongation`` (length over width,
         :func:`thin_pieces`) that hold a disc of radius ``blob_thickness`` cable widths (no
-        crossing does) are objects of the cable's colour, not cable.
+        crossing does, unless the width is underestimated) and are about convex (a crossing
+        is not) are objects of the cable's colour, not cable.
     shade_chroma, shade_reach : float
         Within ``shade_reach`` cable widths of sure pixels, pixels of their chromaticity
         (nearer it than ``shade_chroma`` times its distance from the surroundings'
@@ -840,8 +845,10 @@ def _within(mask, distance):
 
 def _drop_blobs(mask, width, settings):
     """``mask`` without pieces shaped like objects rather than cable: holding a disc wider
-    than ``2 * blob_thickness`` cable widths and shorter than ``blob_elongation`` widths (a
-    piece's length in widths as :func:`thin_pieces` measures it)."""
+    than ``2 * blob_thickness`` cable widths, shorter than ``blob_elongation`` widths (a
+    piece's length in widths as :func:`thin_pieces` measures it) and about convex (filling
+    :data:`_SOLID` of its convex hull or more: strands crossing, in a mask broken into
+    pieces, are as thick and as short, but not convex)."""
     box = _cable_box(mask, 0)  # the pieces lie in the mask's box
     if box is None:
         return mask
@@ -862,12 +869,19 @@ def _drop_blobs(mask, width, settings):
             continue
         ridge = (distance >= cv2.dilate(distance, np.ones((3, 3), np.uint8))) & inside
         half_width = distance[ridge].mean()
-        blob[piece] = area[piece] / max(4.0 * half_width ** 2, 1e-9) < settings.blob_elongation
+        blob[piece] = area[piece] / max(4.0 * half_width ** 2, 1e-9) < settings.blob_elongation \
+            and _solidity(inside) >= _SOLID
     if not blob.any():
         return mask
     kept = mask.copy()
     kept[box] &= ~blob[labels]
     return kept
+
+
+def _solidity(piece):
+    """A piece's area over its convex hull's."""
+    hull = cv2.convexHull(cv2.findNonZero(piece.view(np.uint8)))
+    return float(np.count_nonzero(piece)) / max(cv2.contourArea(hull), 1.0)
 
 
 def cable_mask(image_rgb, colour, settings=SegmentationSettings(), *, model=None):
