@@ -294,7 +294,6 @@ def test_the_looks_bench_s_oracle_seed_is_labelled_and_only_where_it_applies():
     assert _oracle_mean([several]) == ""
 
 
-
 class _FixedModel:
     """A colour model whose probabilities are given (0 to 255), whatever the frame."""
 

@@ -634,7 +634,7 @@ def calibrated_level(model, images_rgb, seeds, settings=SegmentationSettings()):
     if settings.probability_least >= top:
         return top
     levels = np.round(np.arange(top, settings.probability_least - 1e-6, -_LEVEL_STEP), 6)
-    steps = np.ceil(255.0 * levels)
+    steps = np.ceil(255.0 * levels).astype(int)
     found, false, cable = np.zeros(len(levels)), np.zeros(len(levels)), 0
     for image, (seed, objects, width) in zip(images_rgb, seeds):
         if not seed.any():
@@ -644,8 +644,8 @@ def calibrated_level(model, images_rgb, seeds, settings=SegmentationSettings()):
         # counts at or above each level, from a histogram of the probabilities
         counts = [np.cumsum(np.bincount(probability[where], minlength=256)[::-1])[::-1]
                   for where in (inside, far)]
-        found += counts[0][steps.astype(int)]
-        false += counts[1][steps.astype(int)]
+        found += counts[0][steps]
+        false += counts[1][steps]
         cable += np.count_nonzero(inside)
     if cable == 0:
         return top
