@@ -43,7 +43,8 @@ from .stages.mask_checks import MaskCheckSettings, core_thickness, mask_warnings
 from .stages.rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
 from .stages.segment_graph import SegmentGraphSettings, extract_segment_graph_from_voxels
 from .stages.segmentation import (ColourRange, SegmentationSettings, cable_width, junction_map,
-                                  reference_frames, segment_frame, sequence_colour)
+                                  reference_frames, segment_all, segment_frame,
+                                  sequence_colour)
 from .stages.topology import TopologySettings, resolve_topology
 from .threads import map_in_threads, thread_count
 
@@ -342,7 +343,9 @@ def _segment(sequence, colour, settings, stage, cancel):
 
 
 def segment_frames(sequence, colour, model, settings, *, progress=None, cancel=None):
-    """Every frame of a sequence segmented (on ``settings.workers`` threads).
+    """Every frame of a sequence segmented (on ``settings.workers`` threads), a frame whose
+    cable came out far thinner than in the others again
+    (:func:`~engine.stages.segmentation.segment_all`).
 
     Parameters
     ----------
@@ -362,10 +365,10 @@ def segment_frames(sequence, colour, model, settings, *, progress=None, cancel=N
     widths : list of float
         Each frame's cable width in pixels.
     """
-    def segmented(number):
+    def segmented(number, least_width):
         check_cancel(cancel, "segmenting")
         segmentation = segment_frame(sequence.read(number), colour, settings.segmentation,
-                                     model=model)
+                                     model=model, least_width=least_width)
         return (PackedMask(segmentation.mask), PackedMask(segmentation.junctions),
                 segmentation.width)
 
@@ -373,7 +376,12 @@ def segment_frames(sequence, colour, model, settings, *, progress=None, cancel=N
         if progress is not None:
             progress((number + 1) / len(sequence), f"masks: {sequence.names[number]}")
 
-    frames = map_in_threads(settings.workers, "masks", segmented, range(len(sequence)), done)
+    def map_frames(function, numbers, first):  # the progress on the first pass
+        return map_in_threads(settings.workers, "masks", function, numbers,
+                              done if first else None)
+
+    frames = segment_all(segmented, len(sequence), settings.segmentation, map_frames=map_frames,
+                         width_of=lambda frame: frame[2])
     return [list(column) for column in zip(*frames)] if frames else [[], [], []]
 
 

@@ -11,8 +11,8 @@ import numpy as np
 from ..errors import ReconstructionError
 from ..io.ground_truth import read_ground_truth
 from ..io.image_sequence import read_image
-from ..stages.segmentation import (SegmentationSettings, reference_frames, segment_frame,
-                                   sequence_colour)
+from ..stages.segmentation import (SegmentationSettings, reference_frames, segment_all,
+                                   segment_frame, sequence_colour)
 from ..synthetic.scene import SceneSpec, make_scene
 from .common import DEFAULT_SAMPLE, mean_and_worst
 
@@ -52,15 +52,16 @@ def junction_scores(junctions, truth, camera):
 
 
 def _timed(images, colour, settings, model, *, passes=3):
-    """Every frame segmented in one pass, as a reconstruction does (the scoring comes after,
+    """Every frame segmented as a reconstruction does (the scoring comes after,
     so it neither counts nor cools the caches between frames); of ``passes`` passes, the
     fastest (as :mod:`timeit` advises: the others measure the machine's other work too).
     Returns ``(seconds, segmentations)``."""
     best = math.inf
     for _ in range(passes):
         started = time.perf_counter()
-        segmentations = [segment_frame(image, colour, settings, model=model)
-                         for image in images]
+        segmentations = segment_all(
+            lambda k, least: segment_frame(images[k], colour, settings, model=model,
+                                           least_width=least), len(images), settings)
         best = min(best, time.perf_counter() - started)
     return best, segmentations
 

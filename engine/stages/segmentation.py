@@ -83,9 +83,8 @@ _SEAM = 0.15
 
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "SeveralCables",
            "auto_colour", "reference_frames", "sequence_colour", "learn_colour_model",
-           "colour_from_masks",
-           "colour_seed", "colour_at", "segment_frame", "cable_mask", "refine_edges", "cable_width",
-           "junction_map", "junction_centres"]
+           "colour_from_masks", "colour_seed", "colour_at", "segment_frame", "segment_all",
+           "cable_mask", "refine_edges", "cable_width", "junction_map", "junction_centres"]
 
 
 @dataclass(frozen=True)
@@ -194,6 +193,11 @@ class SegmentationSettings:
         The pixels within two pixels of the mask's outline are decided by a classifier learnt
         on synthetic looks (:mod:`engine.stages.outline`), this many times, each around the
         last outline; 0 keeps the refined outline.
+    width_floor : float
+        A cable is about as wide in every view of a sequence: a frame whose cable width
+        comes out under ``width_floor`` times the median over the frames (where only a
+        glossy grey cable's highlight was found, say) is segmented again with that width as
+        the least it can be (:func:`segment_all`); 0 turns this off.
     """
 
     speck_area: float = setting(3.0, low=0, unit="widths²")
@@ -230,6 +234,7 @@ class SegmentationSettings:
     side_contrast: float = setting(20.0, low=0, unit="levels")
     side_contact: float = setting(2.0, low=0, unit="widths")
     outline_passes: int = setting(2, low=0)
+    width_floor: float = setting(0.9, low=0, high=1)
     all_cables: bool = False
 
     def __post_init__(self):
@@ -493,6 +498,11 @@ def cable_width(mask):
     return float(max(2.0 * np.median(distance[ridge]) - 0.5, 1.0))
 
 
+def _at_least(width, least):
+    """``width``, raised to ``least`` unless it is 0 (no cable)."""
+    return max(width, least) if width > 0 else width
+
+
 def _remove_specks(mask, half, min_area):
     """``mask`` without pieces under ``min_area`` pixels, judged on its half-size copy."""
     kept = np.zeros(half.shape, dtype=np.uint8)
@@ -653,7 +663,7 @@ def calibrated_level(model, images_rgb, seeds, settings=SegmentationSettings()):
     return float(levels[np.flatnonzero(score >= score.max() - _LEVEL_MARGIN)[0]])
 
 
-def _model_mask(image_rgb, model, settings, in_range=None):
+def _model_mask(image_rgb, model, settings, in_range=None, least_width=0.0):
     """Pixels the model calls cable: ``(sure, sure or likely)``. Sure at ``probability``;
     likely within half a cable width of a sure one, at ``probability_near`` or inside the
     colour range (a cable's shade side, or a strand darkened where another passes over it,
@@ -671,7 +681,7 @@ def _model_mask(image_rgb, model, settings, in_range=None):
     small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
                        interpolation=cv2.INTER_AREA) > 0
     # the half-size width is half the full-size width
-    width = 2.0 * cable_width(opened(small))
+    width = _at_least(2.0 * cable_width(opened(small)), least_width)
     near_reach = max(settings.near_reach * width, 1.0)
     shade_reach = max(settings.shade_reach * width, 1.0) if settings.shade_chroma > 0 else 0.0
     # the rest happens on the box of the sure pixels grown by the reaches
@@ -903,18 +913,18 @@ def cable_mask(image_rgb, colour, settings=SegmentationSettings(), *, model=None
     return mask, width
 
 
-def _cable_masks(image_rgb, colour, settings, model=None):
+def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
     """``(mask, colour-range mask, width)``: the cable mask with its outline refined
     (:func:`refine_edges`) and the mask before that, whose topology the junctions are read
     from (on the realistic sample, junctions from the refined outline put 12% of their pixels
     farther than 3 r from any crossing; from the colour range's mask, 3.5%)."""
     if isinstance(model, SeveralCables):
-        return _several_masks(image_rgb, model, settings)
+        return _several_masks(image_rgb, model, settings, least_width)
     hsv = hsv_image(image_rgb)
     if settings.model and model is None:
         model = learn_colour_model([image_rgb], colour, settings)
     if settings.model and model is not None:
-        _, raw = _model_mask(image_rgb, model, settings, colour.select(hsv))
+        _, raw = _model_mask(image_rgb, model, settings, colour.select(hsv), least_width)
     else:
         raw = colour.select(hsv)
     raw = opened(raw).view(np.uint8)
@@ -922,14 +932,14 @@ def _cable_masks(image_rgb, colour, settings, model=None):
     half = cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2),
                       interpolation=cv2.INTER_AREA) > 0
     raw = raw > 0
-    width = 2.0 * cable_width(half)
+    width = _at_least(2.0 * cable_width(half), least_width)
     if settings.shadow_chroma > 0 and width > 0:
         without = _without_shadow(raw, image_rgb, width, settings)
         if without is not raw:  # the shadow made the cable look wider
             raw = opened(without)
             half = cv2.resize(raw.view(np.uint8), (raw.shape[1] // 2, raw.shape[0] // 2),
                               interpolation=cv2.INTER_AREA) > 0
-            width = 2.0 * cable_width(half)
+            width = _at_least(2.0 * cable_width(half), least_width)
     if width == 0:
         return raw, raw, 0.0
     mask = _remove_specks(raw, half, settings.speck_area * width * width)
@@ -956,14 +966,14 @@ def _cable_masks(image_rgb, colour, settings, model=None):
     colour_range_mask = mask.copy()
     colour_range_mask[box] = plain
     mask[box] = refined
-    width = cable_width(refined)
+    width = _at_least(cable_width(refined), least_width)
     if settings.outline_passes > 0:
         mask = classify_outline(mask, image_rgb, width, passes=settings.outline_passes)
-        width = cable_width(mask)
+        width = _at_least(cable_width(mask), least_width)
     return mask, colour_range_mask, width
 
 
-def _several_masks(image_rgb, several, settings):
+def _several_masks(image_rgb, several, settings, least_width=0.0):
     """:func:`_cable_masks` of every cable, joined; the width is the cables' mean, each
     weighted by its area. Specks are removed from the joined masks: a stretch of cable seen
     between two passes of another is a small piece of its own mask, not of the joined one.
@@ -971,7 +981,8 @@ def _several_masks(image_rgb, several, settings):
     hue it took the table's darker texture (tuning look two_cables seed 0: mask IoU 0.89 ->
     0.79, then 0.88 with darker pixels of the table's chromaticity left out)."""
     alone = replace(settings, speck_area=0.0, side_reach=0.0)
-    found = [_cable_masks(image_rgb, colour, alone, model) for colour, model in several.cables]
+    found = [_cable_masks(image_rgb, colour, alone, model, least_width)
+             for colour, model in several.cables]
     areas = np.array([np.count_nonzero(m) if w > 0 else 0 for m, _, w in found], dtype=float)
     width = float(np.dot(areas, [w for _, _, w in found]) / areas.sum()) if areas.sum() else 0.0
     mask = _joined([m for m, _, _ in found], width)
@@ -1232,7 +1243,8 @@ def _confirmed(mask, width, centre, settings):
     return bool((count[near] > settings.junction_ratio * 2.0 * radius * width).any())
 
 
-def segment_frame(image_rgb, colour, settings=SegmentationSettings(), *, model=None):
+def segment_frame(image_rgb, colour, settings=SegmentationSettings(), *, model=None,
+                  least_width=0.0):
     """Mask, junctions and width of one frame (junctions from the mask before its outline
     is refined).
 
@@ -1246,11 +1258,54 @@ def segment_frame(image_rgb, colour, settings=SegmentationSettings(), *, model=N
         alone if None and ``settings.model``. Several cables (:func:`sequence_colour`): each
         is segmented with its own colour and model, the masks joined, and the junctions read
         from the joined mask (a cable crossing another is a junction).
+    least_width : float, optional
+        Every width the frame's cable is measured at, in pixels, is raised to this (the
+        sequence's width, :func:`segment_all`); 0 leaves them as measured.
 
     Returns
     -------
     FrameSegmentation
     """
-    mask, colour_range_mask, width = _cable_masks(image_rgb, colour, settings, model)
+    mask, colour_range_mask, width = _cable_masks(image_rgb, colour, settings, model,
+                                                  least_width)
     junctions = junction_map(colour_range_mask, width, settings) & mask
     return FrameSegmentation(mask=mask, junctions=junctions, width=width)
+
+
+def segment_all(segment, count, settings=SegmentationSettings(), *, map_frames=None,
+                width_of=None):
+    """Every frame of a sequence segmented, the frames whose cable came out too thin
+    (``settings.width_floor``) again.
+
+    Parameters
+    ----------
+    segment : callable
+        ``segment(number, least_width)``: frame ``number`` segmented (:func:`segment_frame`
+        with ``least_width``).
+    count : int
+        Frames in the sequence.
+    settings : SegmentationSettings, optional
+    map_frames : callable, optional
+        ``map_frames(function, numbers, first)``: ``function`` of each number, in order (the
+        frames in order, on this thread, if None); ``first`` is True on the first pass.
+    width_of : callable, optional
+        The cable width of a result of ``segment`` (its ``width`` if None).
+
+    Returns
+    -------
+    list
+        ``segment``'s result for each frame.
+    """
+    if map_frames is None:
+        def map_frames(function, numbers, first):
+            return [function(number) for number in numbers]
+    found = list(map_frames(lambda number: segment(number, 0.0), range(count), True))
+    widths = np.array([result.width if width_of is None else width_of(result)
+                       for result in found], dtype=float)
+    if settings.width_floor <= 0 or not np.any(widths > 0):
+        return found
+    least = settings.width_floor * float(np.median(widths[widths > 0]))
+    thin = [int(k) for k in np.flatnonzero((widths > 0) & (widths < least))]
+    for number, result in zip(thin, map_frames(lambda k: segment(k, least), thin, False)):
+        found[number] = result
+    return found
