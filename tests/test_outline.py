@@ -131,3 +131,17 @@ def test_learning_on_a_scene_gives_a_classifier_that_decides_another(frame):
     wrong = grown(truth, 2)
     fixed = outline.classify_outline(wrong, image, cable_width(wrong), classifier=classifier)
     assert iou(fixed, truth) > iou(wrong, truth) + 0.05
+
+
+@pytest.mark.parametrize("window", [5, 21])
+def test_window_sums_are_a_box_filter_s_at_every_pixel_and_edge(window):
+    """The integral image's window sums equal OpenCV's box filter (default border: reflected
+    without the edge pixel twice) at every pixel, the frame's edges and corners too."""
+    rng = np.random.default_rng(window)
+    image = rng.integers(0, 256, (60, 90, 3), dtype=np.uint8)
+    where = rng.random((60, 90)) < 0.3
+    colours, counts = outline._window_sums(image, where, window, np.arange(60 * 90))
+    four = cv2.merge([*cv2.split(cv2.bitwise_and(image, image, mask=where.view(np.uint8))),
+                      where.view(np.uint8)])
+    box = cv2.boxFilter(four, cv2.CV_32F, (window, window), normalize=False).reshape(-1, 4)
+    assert np.array_equal(colours, box[:, :3]) and np.array_equal(counts, box[:, 3])

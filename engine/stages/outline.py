@@ -133,12 +133,27 @@ def _disc(radius):
 
 def _window_sums(image, where, window, flat):
     """Sums of the colours of ``where``'s pixels (``image`` uint8) in a ``window``-wide square
-    around the pixels ``flat``, and how many they are (float32, exact: integer sums)."""
+    around the pixels ``flat``, and how many they are (float32, exact: integer sums).
+
+    As a box filter with OpenCV's default border (reflected, the edge pixel once) would give
+    them, from the integral image of the frame so bordered: four look-ups a pixel, not a
+    filter over the whole box."""
     weight = where.view(np.uint8)
-    # colours and count as the four channels of one image: one filter, not two
+    # colours and count as the four channels of one image: one integral, not two
     four = cv2.merge([*cv2.split(cv2.bitwise_and(image, image, mask=weight)), weight])
-    total = cv2.boxFilter(four, cv2.CV_32F, (window, window), normalize=False)
-    total = total.reshape(-1, 4)[flat]
+    half = window // 2
+    four = cv2.copyMakeBorder(four, half, half, half, half, cv2.BORDER_REFLECT_101)
+    # integer sums; past what 32 bits hold (a 4K box), in float64, exact to 2**53
+    exact = cv2.CV_32S if four.shape[0] * four.shape[1] * 255 < 2**31 else cv2.CV_64F
+    integral = cv2.integral(four, sdepth=exact)
+    stride = integral.shape[1]
+    integral = integral.reshape(-1, 4)
+    # the window of frame pixel (row, col) covers rows row .. row + window - 1 and as many
+    # columns of the bordered frame: integral corners (row, col) to (row + window, col + window)
+    rows, cols = np.divmod(flat, where.shape[1])
+    corner = rows * stride + cols
+    total = (integral[corner + window * stride + window] - integral[corner + window * stride]
+             - integral[corner + window] + integral[corner]).astype(np.float32)
     return total[:, :3], total[:, 3]
 
 
@@ -184,8 +199,11 @@ def outline_features(mask, image_rgb, width):
                         rows[:, None] + STEPS * ny[:, None])
     depth = (cv2.distanceTransform(cable, cv2.DIST_L2, cv2.DIST_MASK_5).ravel()[flat]
              - cv2.distanceTransform(1 - cable, cv2.DIST_L2, cv2.DIST_MASK_5).ravel()[flat])
-    features = np.column_stack([*_profile_features(profile, cable_colour, background),
-                                np.clip(depth, -REACH - 1, REACH + 1)]).astype(np.float32)
+    features = np.empty((len(flat), FEATURES), np.float32)
+    for column, values in zip(range(0, FEATURES, len(STEPS)),
+                              _profile_features(profile, cable_colour, background)):
+        features[:, column:column + len(STEPS)] = values
+    np.clip(depth, -REACH - 1, REACH + 1, out=features[:, -1])
     # flat indices into the frame
     top, left = box[0].start, box[1].start
     return (rows + top) * mask.shape[1] + cols + left, features
