@@ -370,13 +370,12 @@ def test_a_frame_where_only_the_cable_s_highlight_was_found_gets_the_sequence_s_
     sizes what widens the mask to the cable (its missing side) too short. Segmented again
     with nine tenths of the median width as the least, those frames' masks cover the cable;
     the others do not change."""
-    from engine.stages.segmentation import segment_all
+    from engine.stages.segmentation import segment_images
 
     scene = look_scene("neutral", 7, views=10, width=960, height=720)
     colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
     alone = [segment_frame(frame, colour, model=model) for frame in scene.images]
-    found = segment_all(lambda k, least: segment_frame(scene.images[k], colour, model=model,
-                                                       least_width=least), 10)
+    found = segment_images(scene.images, colour, model=model)
     least = 0.9 * np.median([f.width for f in alone])
     thin = [k for k, f in enumerate(alone) if f.width < least]
     assert len(thin) >= 2 and all(alone[k].width < 0.5 * least for k in thin)

@@ -25,8 +25,8 @@ from scipy.spatial import cKDTree
 from ..geometry.camera import Camera
 from ..stages.carving import CarvingSettings, carve
 from ..stages.segment_graph import extract_segment_graph_from_voxels
-from ..stages.segmentation import (cable_width, junction_map, reference_frames, segment_all,
-                                   segment_frame, sequence_colour)
+from ..stages.segmentation import (cable_width, junction_map, reference_frames,
+                                   segment_images, sequence_colour)
 from ..synthetic.cameras import orbit_cameras
 from ..synthetic.render import render_masks
 from ..synthetic.scene import SceneSpec, make_scene
@@ -120,8 +120,7 @@ def _scene_rows(specs, settings, folder, cells):
         scene = make_scene(spec)
         frames = [scene.images[k] for k in reference_frames(len(scene.images), 0, 3)]
         colour, model = sequence_colour(frames)  # as the reconstruction segments
-        segmentations = segment_all(lambda k, least: segment_frame(
-            scene.images[k], colour, model=model, least_width=least), len(scene.images))
+        segmentations = segment_images(scene.images, colour, model=model)
         place = Path(folder) / label.replace(" ", "_")
         place.mkdir()
         paths = _write_masks(place, [s.mask for s in segmentations],

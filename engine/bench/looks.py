@@ -27,7 +27,7 @@ import numpy as np
 
 from ..io.image_sequence import read_image
 from ..stages.segmentation import (SegmentationSettings, colour_from_masks, reference_frames,
-                                   segment_all, segment_frame, sequence_colour)
+                                   segment_images, sequence_colour)
 from ..synthetic.looks import HELD_OUT_SEEDS, LOOK_FAMILIES, SEVERAL_CABLES, TUNING_SEEDS
 from ..synthetic.scene import look_scene
 
@@ -77,18 +77,15 @@ def score_sequence(images, truths, settings=SegmentationSettings(), *, oracle=Fa
     colour, model = sequence_colour([images[k] for k in frames], None, settings)
     setup = time.perf_counter() - started
     started = time.perf_counter()  # one pass, as a reconstruction segments; scored after
-    masks = [found.mask for found in segment_all(
-        lambda k, least: segment_frame(images[k], colour, settings, model=model,
-                                       least_width=least), len(images), settings)]
+    masks = [found.mask for found in segment_images(images, colour, settings, model=model)]
     seconds = time.perf_counter() - started
     ious = [_iou(mask, truth) for mask, truth in zip(masks, truths)]
     oracle_ious = None
     if oracle and not settings.all_cables:
         known, known_model = colour_from_masks([images[k] for k in frames],
                                                [truths[k] for k in frames], settings)
-        oracle_ious = [_iou(found.mask, truth) for found, truth in zip(segment_all(
-            lambda k, least: segment_frame(images[k], known, settings, model=known_model,
-                                           least_width=least), len(images), settings), truths)]
+        oracle_ious = [_iou(found.mask, truth) for found, truth in zip(
+            segment_images(images, known, settings, model=known_model), truths)]
     return {"iou": ious, "naive": [_iou(naive_mask(i), t) for i, t in zip(images, truths)],
             "oracle": oracle_ious,
             "setup_ms": 1000.0 * setup, "ms_per_frame": 1000.0 * seconds / len(images),

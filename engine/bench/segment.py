@@ -11,8 +11,8 @@ import numpy as np
 from ..errors import ReconstructionError
 from ..io.ground_truth import read_ground_truth
 from ..io.image_sequence import read_image
-from ..stages.segmentation import (SegmentationSettings, reference_frames, segment_all,
-                                   segment_frame, sequence_colour)
+from ..stages.segmentation import (SegmentationSettings, reference_frames, segment_images,
+                                   sequence_colour)
 from ..synthetic.scene import SceneSpec, make_scene
 from .common import DEFAULT_SAMPLE, mean_and_worst
 
@@ -59,9 +59,7 @@ def _timed(images, colour, settings, model, *, passes=3):
     best = math.inf
     for _ in range(passes):
         started = time.perf_counter()
-        segmentations = segment_all(
-            lambda k, least: segment_frame(images[k], colour, settings, model=model,
-                                           least_width=least), len(images), settings)
+        segmentations = segment_images(images, colour, settings, model=model)
         best = min(best, time.perf_counter() - started)
     return best, segmentations
 

@@ -84,7 +84,8 @@ _SEAM = 0.15
 __all__ = ["ColourRange", "SegmentationSettings", "FrameSegmentation", "SeveralCables",
            "auto_colour", "reference_frames", "sequence_colour", "learn_colour_model",
            "colour_from_masks", "colour_seed", "colour_at", "segment_frame", "segment_all",
-           "cable_mask", "refine_edges", "cable_width", "junction_map", "junction_centres"]
+           "segment_images", "cable_mask", "refine_edges", "cable_width", "junction_map",
+           "junction_centres"]
 
 
 @dataclass(frozen=True)
@@ -1309,3 +1310,10 @@ def segment_all(segment, count, settings=SegmentationSettings(), *, map_frames=N
     for number, result in zip(thin, map_frames(lambda k: segment(k, least), thin, False)):
         found[number] = result
     return found
+
+
+def segment_images(images_rgb, colour, settings=SegmentationSettings(), *, model=None):
+    """:func:`segment_all` of frames held in memory: a :class:`FrameSegmentation` each."""
+    return segment_all(lambda number, least: segment_frame(
+        images_rgb[number], colour, settings, model=model, least_width=least),
+        len(images_rgb), settings)
