@@ -1,6 +1,7 @@
 """The benches' spread rows: each family's mean and worst beside its scenes, failed runs left
 out of them and shown with their error."""
 
+import numpy as np
 import pytest
 
 from engine.bench.carve import _spread
@@ -98,3 +99,23 @@ def test_a_profile_charges_each_engine_function_its_library_calls_but_not_its_ca
     stages = [row for row in rows if row["function"] == "(all of the stage)"]
     assert stages[0]["stage"] == "masks"
     assert sum(row["share"] for row in stages) == pytest.approx(1.0)
+
+
+def test_bench_looks_per_scene_gives_one_row_per_scene_with_its_seed():
+    """``bench looks --per-scene``: a row per scene (its seed), no family or summary rows; the
+    family's row of the same run is the mean of its scenes' rows."""
+    from engine.bench.looks import bench_looks
+
+    options = dict(seeds=2, views=3, width=640, height=480, captures=None, real=None,
+                   families=("saturated",), oracle=False)
+    scenes = bench_looks(per_scene=True, **options)
+    assert [(r["set"], r["scene"]) for r in scenes] == [
+        ("tuning", "seed 0"), ("tuning", "seed 1"), ("held-out", "seed 1000"),
+        ("held-out", "seed 1001")]
+    assert all(r["frames"] == 3 and 0.0 <= r["iou_worst_frame"] <= r["iou_mean"] <= 1.0
+               for r in scenes)
+    families = bench_looks(**options)
+    assert [r["looks"] for r in families] == ["saturated", "saturated", "all families",
+                                              "all families"]
+    assert families[0]["iou_mean"] == pytest.approx(
+        np.mean([r["iou_mean"] for r in scenes[:2]]))

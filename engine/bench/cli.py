@@ -31,6 +31,9 @@ def add_bench_command(commands, *, parents=()):
     bench.add_argument("--profile", action="store_true",
                        help="pipeline: run each reconstruction under cProfile and print the "
                             "functions that took its time after the table")
+    bench.add_argument("--per-scene", action="store_true",
+                       help="looks: one row per scene and capture, not per family (two runs' "
+                            "tables then compare scene by scene)")
     bench.add_argument("--ours-only", action="store_true",
                        help="pipeline-looks: only the rows of our masks (not the naive "
                             "threshold's or the exact masks', which no setting changes)")
@@ -84,7 +87,9 @@ def run_bench(args):
             print(format_table(bench_segment(sample=args.sample, views=args.views,
                                              seeds=args.seeds, settings=segmentation)))
             print()
-        rows = bench_looks(seeds=args.seeds, settings=segmentation, **_family_options(args))
+        rows = bench_looks(seeds=args.seeds, settings=segmentation,
+                           per_scene=args.per_scene and args.stage == "looks",
+                           **_family_options(args))
     elif args.stage == "cameras":
         from .cameras import bench_cameras
 

@@ -104,6 +104,16 @@ def _row(name, split, scores):
             "ms_per_frame": float(np.mean([s["ms_per_frame"] for s in scores]))}
 
 
+def _scene_row(name, split, scene, scores):
+    """One scene's row (``bench looks --per-scene``): its mean and worst frame."""
+    oracle = scores.get("oracle")
+    return {"looks": name, "set": split, "scene": scene, "frames": len(scores["iou"]),
+            "iou_mean": float(np.mean(scores["iou"])),
+            "iou_worst_frame": float(np.min(scores["iou"])),
+            "naive_iou_mean": float(np.mean(scores["naive"])),
+            "oracle_seed_iou": "" if oracle is None else float(np.mean(oracle))}
+
+
 def _oracle_mean(scores):
     """Mean over the scenes of the oracle seed's IoU; "" when no scene has one (several
     cables), marked "(n)" when only n of them do."""
@@ -125,8 +135,10 @@ def _read_capture(folder, mask_folder):
 
 def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samples") / "looks",
                 real=Path("..") / "shared" / "real" / "mbest-s1",
-                settings=SegmentationSettings(), families=LOOK_FAMILIES, oracle=True):
-    """One row per look family and seed set, then the Cycles captures and real photos.
+                settings=SegmentationSettings(), families=LOOK_FAMILIES, oracle=True,
+                per_scene=False):
+    """One row per look family and seed set, then the Cycles captures and real photos (with
+    ``per_scene``, one row per scene and capture instead).
 
     Parameters
     ----------
@@ -144,6 +156,9 @@ def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samp
         Add the *oracle seed* column (:func:`score_sequence`): what the colour model and the
         rules after it make of the true masks as their seed, beside what they make of the
         found cable's.
+    per_scene : bool, optional
+        One row per scene (its seed) and capture, not per family: two runs' tables then
+        compare scene by scene.
 
     Returns
     -------
@@ -162,22 +177,30 @@ def bench_looks(*, seeds=3, views=10, width=960, height=720, captures=Path("samp
                         list(scene.images), list(scene.masks),
                         replace(settings, all_cables=True) if family in SEVERAL_CABLES
                         else settings, oracle=oracle))
+                    if per_scene:
+                        rows.append(_scene_row(family, split, f"seed {seed}", scores[-1]))
                 every[split] += scores
-                rows.append(_row(family, split, scores))
-        for split, scores in every.items():
-            rows.append(_row("all families", split, scores))
+                if not per_scene:
+                    rows.append(_row(family, split, scores))
+        if not per_scene:
+            for split, scores in every.items():
+                rows.append(_row("all families", split, scores))
         if captures is not None and Path(captures).is_dir():
-            captures = Path(captures)
+            folders = [folder for folder in sorted(Path(captures).iterdir())
+                       if (folder / "ground_truth.json").is_file()]
             scores = [score_sequence(*_read_capture(folder, "masks"), settings, oracle=oracle)
-                      for folder in sorted(captures.iterdir())
-                      if (folder / "ground_truth.json").is_file()]
-            if scores:
+                      for folder in folders]
+            if per_scene:
+                rows += [_scene_row("Cycles captures", "held-out", folder.name, score)
+                         for folder, score in zip(folders, scores)]
+            elif scores:
                 rows.append(_row("Cycles captures", "held-out", scores))
         if real is not None and (Path(real) / "labels").is_dir():
             real = Path(real)
-            rows.append(_row(f"real photos ({real.name})", "used in tuning",
-                             [score_sequence(*_read_capture(real, "labels"), settings,
-                                             oracle=oracle)]))
+            scores = score_sequence(*_read_capture(real, "labels"), settings, oracle=oracle)
+            rows.append(_scene_row("real photos", "used in tuning", real.name, scores)
+                        if per_scene else
+                        _row(f"real photos ({real.name})", "used in tuning", [scores]))
     finally:
         cv2.setNumThreads(threads)
     return rows
