@@ -504,6 +504,15 @@ def _at_least(width, least):
     return max(width, least) if width > 0 else width
 
 
+def _rough_width(mask, least_width):
+    """``mask`` (bool) at half size and the full-size width measured on it (raised to
+    ``least_width``): a rough width, enough to size the clean-up, costs a quarter of a full
+    one."""
+    half = cv2.resize(mask.view(np.uint8), (mask.shape[1] // 2, mask.shape[0] // 2),
+                      interpolation=cv2.INTER_AREA) > 0
+    return half, _at_least(2.0 * cable_width(half), least_width)
+
+
 def _remove_specks(mask, half, min_area):
     """``mask`` without pieces under ``min_area`` pixels, judged on its half-size copy."""
     kept = np.zeros(half.shape, dtype=np.uint8)
@@ -928,19 +937,13 @@ def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
         _, raw = _model_mask(image_rgb, model, settings, colour.select(hsv), least_width)
     else:
         raw = colour.select(hsv)
-    raw = opened(raw).view(np.uint8)
-    # a rough width at half size (enough to size the clean-up) costs a quarter of a full one
-    half = cv2.resize(raw, (raw.shape[1] // 2, raw.shape[0] // 2),
-                      interpolation=cv2.INTER_AREA) > 0
-    raw = raw > 0
-    width = _at_least(2.0 * cable_width(half), least_width)
+    raw = opened(raw)
+    half, width = _rough_width(raw, least_width)
     if settings.shadow_chroma > 0 and width > 0:
         without = _without_shadow(raw, image_rgb, width, settings)
         if without is not raw:  # the shadow made the cable look wider
             raw = opened(without)
-            half = cv2.resize(raw.view(np.uint8), (raw.shape[1] // 2, raw.shape[0] // 2),
-                              interpolation=cv2.INTER_AREA) > 0
-            width = _at_least(2.0 * cable_width(half), least_width)
+            half, width = _rough_width(raw, least_width)
     if width == 0:
         return raw, raw, 0.0
     mask = _remove_specks(raw, half, settings.speck_area * width * width)
