@@ -38,6 +38,7 @@ from .progress import AnySet, StageProgress, check_cancel
 from .settings import check_settings, setting, settings_from_dict, settings_to_dict
 from .stages.cameras import CameraEstimationSettings, estimate_cameras
 from .stages.carving import CarvingSettings, carve
+from .stages.core_ends import follow_free_ends
 from .stages.mask_agreement import MaskAgreementSettings, agree_masks
 from .stages.mask_checks import MaskCheckSettings, core_thickness, mask_warnings, unexplained_share
 from .stages.rod_fit import Contact, ImageEvidence, Obstacle, RodFitSettings, Voxels, fit_rod
@@ -722,6 +723,13 @@ def read_run(path):
         raise InputError(f"{path}: run.inputs: {error}") from None
 
 
+def _core_graph(grid, core, settings, stage, cancel):
+    """The segment graph of the grid's ``core`` voxels."""
+    return extract_segment_graph_from_voxels(
+        grid.index[core], grid.junction[core], origin=grid.origin, voxel_size=grid.voxel_size,
+        radius=grid.radius, settings=settings.graph, progress=stage, cancel=cancel)
+
+
 def run_reconstruction(images, *, cameras=None, masks=None, colour=None, diameter=None,
                        length=None, settings=PipelineSettings(), progress=None, cancel=None):
     """Reconstruct the cable(s) seen in a sequence of frames, keeping what a re-fit needs.
@@ -957,9 +965,13 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
             f"together may be missed"]
     stage = clock.stage("graph")
     core = grid.core(settings.carving.core_agreement)
-    graph = extract_segment_graph_from_voxels(
-        grid.index[core], grid.junction[core], origin=grid.origin, voxel_size=grid.voxel_size,
-        radius=grid.radius, settings=settings.graph, progress=stage, cancel=cancel)
+    graph = _core_graph(grid, core, settings, stage, cancel)
+    core, followed = follow_free_ends(grid, core, graph, up=up,
+                                      length=settings.carving.follow_length * grid.radius)
+    if followed:
+        for walk in followed:
+            log.info("free end followed %.1f r through the hull", walk.length / grid.radius)
+        graph = _core_graph(grid, core, settings, stage, cancel)
     clock.done()
     if graph.n_segments == 0:
         raise ReconstructionError("no cable segment could be found in the carved volume")

@@ -101,6 +101,11 @@ class CarvingSettings:
         The segment graph is built on the hull's core: occupied voxels on cable pixels in at
         least this fraction of their views (the half-vote hull is several radii wide and tall
         where views look along the cable; its core is about one radius from the centreline).
+    follow_length : float
+        Each free end of the core's graph is followed through the hull, up to this many
+        radii, to the junction missing a branch or the free end it broke from; what the walk
+        passes joins the core (where a strand's masks miss it in some views, its core
+        breaks; README, *Free ends followed through the hull*). 0: not followed.
     root_cells : int
         The coarsest level has about this many voxels along the region's side.
     coarse_to_fine : bool
@@ -125,6 +130,7 @@ class CarvingSettings:
     min_view_fraction: float = setting(0.3, low=0, high=1)
     min_piece_length: float = setting(10.0, low=0, unit="r")
     core_agreement: float = setting(0.95, above=0, high=1)
+    follow_length: float = setting(25.0, low=0, unit="r")
     root_cells: int = setting(64, low=2)
     coarse_to_fine: bool = True
     threads: int = setting(0, low=0)

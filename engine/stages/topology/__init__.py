@@ -56,10 +56,12 @@ are revisited first (a best-first search over combinations of matchings ranked b
 probability), and the probabilities are conditioned on the check. Several connected pieces give
 several paths (several cables).
 
-Imperfect graphs: a short branch to a free end at a junction with an odd number of branches (or
-more than four) may be a spur of carving noise: it may stay unpaired, and is then dropped; a
-junction with an odd number of branches and no spur, near a free end whose cable heads towards
-it, has lost a branch: the gap is bridged. Two such junctions joined by a short segment
+Imperfect graphs (the pipeline has already followed the core's free ends through the hull to
+the junctions missing a branch, :mod:`engine.stages.core_ends`; what is left comes here): a
+short branch to a free end at a junction with an odd number of branches (or more than four)
+may be a spur of carving noise: it may stay unpaired, and is then dropped; a junction with an
+odd number of branches and no spur, near a free end whose cable heads towards it, has lost a
+branch: the gap is bridged. Two such junctions joined by a short segment
 (``bigon_length``) are two crossings of a twist whose strands lie together between them:
 the segment is doubled, its copies a radius either side. Degree 2 junctions are passed
 through, degree 3 junctions join their straightest two branches and end the third, junctions
