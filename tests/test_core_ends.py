@@ -29,7 +29,7 @@ def grid_of(lines, weak=(), *, hull=1.6, core=1.0, junctions=()):
         junction, _ = voxelize_tubes([[j] for j in junctions], 2 * R, origin=origin,
                                      shape=fat.shape)
     index = np.argwhere(fat)
-    return VoxelGrid(index=index, junction=junction[fat] & True, origin=origin, voxel_size=1.0,
+    return VoxelGrid(index=index, junction=junction[fat], origin=origin, voxel_size=1.0,
                      radius=R, visible=np.full(len(index), 24, np.int16),
                      agreement=agreement[fat])
 
@@ -114,7 +114,6 @@ def test_a_walk_bends_with_the_cable(angle):
 def test_a_walk_passes_under_a_strand_at_its_own_height():
     # the lower strand's core is broken from x = -7 r to 2 r past the crossing: at the crossing
     # only the upper strand's voxels agree fully, yet the walk keeps to the table
-    grid = crossing(-7 * R)
     weak = [[[-7 * R, 0, R], [2 * R, 0, R]]]
     lines = [[[-L, 0, R], [L, 0, R]], [[0, -L, 3 * R], [0, L, 3 * R]]]
     grid = grid_of(lines, weak, junctions=[[0, 0, 2 * R]])

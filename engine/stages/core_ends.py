@@ -82,7 +82,8 @@ class _Hull:
         self.extent = extent
         self.strides = np.array([extent[1] * extent[2], extent[2], 1], dtype=np.int64)
         keys = (grid.index - self.low) @ self.strides
-        self.order = np.argsort(keys, kind="stable")  # C order is key order: already sorted
+        # the grid lists its voxels in C order, key order: the sort finds them sorted
+        self.order = np.argsort(keys, kind="stable")
         self.sorted = keys[self.order]
 
     def around(self, centre, radius):
