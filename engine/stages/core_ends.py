@@ -11,7 +11,7 @@ through the hull*).
 
 Here each free end of the graph is *followed*: stepped along its heading through the hull,
 each step re-centred on the hull's cross-section (its voxels of about the highest agreement
-within a radius of the walk's height), turning as a cable bends, through any strand it passes
+within a radius of the point ahead), turning as a cable bends, through any strand it passes
 under or over, until it reaches a junction with an odd number of branches (a branch is
 missing there) or another free end heading back at it. The hull's voxels within 0.7 radii of
 the walk then join the core, and the graph is built again, so the crossings the walk passes
@@ -25,7 +25,9 @@ import numpy as np
 
 __all__ = ["follow_free_ends", "FollowedEnd"]
 
-#: A walk steps this many radii at a time and looks this far (radii) to each side of its line.
+#: A walk steps this many radii at a time and re-centres on the hull's voxels within this many
+#: radii of the point a step ahead (so also within a radius of its height: a strand it passes
+#: under, two radii above it, does not lift it).
 _STEP = 0.5
 _REACH = 1.0
 #: The hull's voxels within this many radii of a walk join the core (a core is about a
@@ -45,9 +47,6 @@ _FACING = -0.5
 #: A walk's heading turns by at most this many radians a step (a cable bends smoothly; this
 #: is a bend of 4 radii's radius).
 _TURN = 0.12
-#: A step re-centres on the voxels within this many radii of the walk's height: a strand the
-#: walk passes under (about two radii above it) does not lift it.
-_HEIGHT = 1.0
 #: A free end's heading is measured over this many radii of its segment.
 _HEADING = 2.0
 
@@ -150,7 +149,7 @@ def _turned(heading, wanted, most):
     return math.cos(most) * heading + math.sin(most) * side / size
 
 
-def _walk(hull, start, heading, up, r, length, arrive):
+def _walk(hull, start, heading, r, length, arrive):
     """Step from ``start`` along ``heading`` through the hull; ``arrive(position, heading)``
     names the node a step reaches (or None). The walk's points and the node, or None."""
     position, points = np.asarray(start, dtype=float), [np.asarray(start, dtype=float)]
@@ -160,7 +159,7 @@ def _walk(hull, start, heading, up, r, length, arrive):
         rows, centres = hull.around(ahead, _REACH * r)
         if len(rows):
             offset = centres - ahead
-            keep = (np.abs(offset @ heading) <= 0.5 * step) & (np.abs(offset @ up) <= _HEIGHT * r)
+            keep = np.abs(offset @ heading) <= 0.5 * step
             rows, offset = rows[keep], offset[keep]
         if not len(rows):
             return None  # out of the hull: the cable's end
@@ -230,7 +229,7 @@ def follow_free_ends(grid, core, graph, *, up, length):
                     return other
             return None
 
-        walked = _walk(hull, position, heading, up, r, length, arrive)
+        walked = _walk(hull, position, heading, r, length, arrive)
         if walked is None:
             continue
         points, target = walked
