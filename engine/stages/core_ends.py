@@ -23,6 +23,9 @@ import math
 
 import numpy as np
 
+from ..geometry.polylines import arc_length
+from .sparse_voxels import key_box
+
 __all__ = ["follow_free_ends", "FollowedEnd"]
 
 #: A walk steps this many radii at a time and re-centres on the hull's voxels within this many
@@ -68,7 +71,7 @@ class FollowedEnd:
 
     def __init__(self, end, target, points):
         self.end, self.target, self.points = end, target, points
-        self.length = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+        self.length = float(arc_length(points)[-1])
 
 
 class _Hull:
@@ -76,10 +79,7 @@ class _Hull:
 
     def __init__(self, grid):
         self.grid = grid
-        self.low = grid.index.min(axis=0) - 1
-        extent = grid.index.max(axis=0) - self.low + 2
-        self.extent = extent
-        self.strides = np.array([extent[1] * extent[2], extent[2], 1], dtype=np.int64)
+        self.low, self.extent, self.strides = key_box(grid.index)
         keys = (grid.index - self.low) @ self.strides
         # the grid lists its voxels in C order, key order: the sort finds them sorted
         self.order = np.argsort(keys, kind="stable")
@@ -109,8 +109,7 @@ class _Hull:
 
 def _heading(points, span):
     """Unit direction of travel at the last point of a polyline, over ``span``."""
-    steps = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    back = np.concatenate([[0.0], np.cumsum(steps[::-1])])
+    back = arc_length(points[::-1])
     first = int(np.searchsorted(back, span))
     start = points[::-1][min(first, len(points) - 1)]
     direction = points[-1] - start

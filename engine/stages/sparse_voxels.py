@@ -12,20 +12,41 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse import csgraph
 
-__all__ = ["NEIGHBOUR_STEPS", "keys", "sorted_voxels", "neighbours", "pieces"]
+__all__ = ["NEIGHBOUR_STEPS", "key_box", "keys", "sorted_voxels", "neighbours", "pieces"]
 
 #: The 26 neighbour steps of a voxel, in C order (the same order as the dense gather gave).
 NEIGHBOUR_STEPS = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1)
                             for c in (-1, 0, 1) if (a, b, c) != (0, 0, 0)])
 
 
-def _keys(index):
-    """Each voxel's key in the box padded by one voxel, and the box's strides."""
+def key_box(index):
+    """The box the keys are made in: its low corner (one voxel below the voxels' least
+    indices), its extent (one voxel of margin past the greatest) and its strides.
+
+    Parameters
+    ----------
+    index : ndarray of int64, shape (n, 3), n > 0
+
+    Returns
+    -------
+    low, extent, strides : ndarray of int64, shape (3,)
+
+    Raises
+    ------
+    ValueError
+        The box holds over 2^62 voxels.
+    """
     low = index.min(axis=0) - 1
     extent = index.max(axis=0) - low + 2
     if np.prod(extent.astype(np.float64)) >= 2.0 ** 62:
         raise ValueError("the voxels span a box too large to index (over 2^62 voxels)")
     strides = np.array([extent[1] * extent[2], extent[2], 1], dtype=np.int64)
+    return low, extent, strides
+
+
+def _keys(index):
+    """Each voxel's key in the box padded by one voxel, and the box's strides."""
+    low, _, strides = key_box(index)
     return (index - low) @ strides, strides
 
 
