@@ -118,8 +118,12 @@ class SegmentationSettings:
         Holes in the mask smaller than this times the width squared are filled before thinning.
     edge_reach : int
         Pixels within this many pixels of the mask's outline are re-decided by their colour
-        against the local cable and background colours (:func:`refine_edges`); 0 keeps the
-        colour range's outline.
+        against the cable's and the background's colours (:func:`refine_edges`) before the
+        outline's classifier; 0 (the default) leaves the outline to the classifier. The
+        refinement reads one colour for the whole cable, so on a two-tone cable it takes the
+        edge between its two colours for the outline and cuts a side off; with it on, the
+        classifier (learnt on masks without it) decides the outline less well (mean IoU on
+        the tuning looks 0.9296 without, 0.9242 with it and the classifier learnt with it).
     edge_contrast : float
         An edge pixel is re-decided only where the local cable and background colours differ
         by at least this much (RGB distance, 8-bit levels).
@@ -211,7 +215,7 @@ class SegmentationSettings:
     junction_pair: float = setting(2.5, low=0, unit="widths")
     junction_spur: float = setting(1.0, low=0, unit="widths")
     junction_hole: float = setting(0.5, low=0, unit="widths²")
-    edge_reach: int = setting(2, low=0, unit="px")
+    edge_reach: int = setting(0, low=0, unit="px")
     edge_contrast: float = setting(20.0, low=0, unit="levels")
     model: bool = True
     model_frames: int = setting(3, low=1)
