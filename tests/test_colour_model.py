@@ -76,6 +76,17 @@ def test_the_cable_is_found_on_every_look(family):
     assert (found & truth).sum() > 0.3 * truth.sum()
 
 
+def test_a_striped_cable_is_found_when_none_of_its_colours_pairs_ranks_high():
+    # blue and white stripes on green tiles (tuning seed 16): each stripe colour alone, and
+    # each pair of the cable's four colour clusters, is less cable-like than the tiles'
+    # grout, so a search started from the best few clusters and pairs chose the grout
+    scene = look_scene("patterned", 16, views=10, width=640, height=480)
+    _, candidate = find_cable([scene.images[k] for k in reference_frames(10, 0, 3)])
+    found, truth = candidate.select_rgb(scene.images[0]), scene.masks[0]
+    assert (found & truth).sum() > 0.8 * found.sum()
+    assert (found & truth).sum() > 0.6 * truth.sum()
+
+
 def test_a_cast_shadow_is_not_the_cable():
     scene = look_scene("air", 3, views=10, width=640, height=480)
     colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])

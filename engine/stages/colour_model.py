@@ -229,9 +229,10 @@ class CableCandidate:
 def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3, size=_SMALL):
     """The most cable-like groups of colour clusters of a frame, best first.
 
-    Each cluster starts a group; clusters are added to it while they make it more cable-like
-    (a cable's lit side, shade side, highlight or stripes are different clusters of one thin
-    object). A cluster that looks like a shadow (:func:`_shadow_likeness`) counts for less.
+    Each cluster and each pair of clusters starts a group; clusters are added to it while they
+    make it more cable-like (a cable's lit side, shade side, highlight or stripes are different
+    clusters of one thin object). A cluster that looks like a shadow
+    (:func:`_shadow_likeness`) counts for less.
 
     Parameters
     ----------
@@ -270,12 +271,12 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3, size=_SMALL):
             scored[key] = value * float(np.prod([penalty[k] for k in key]))
         return scored[key]
 
-    # start from the best clusters and the best pairs (a striped cable's bands are short
-    # pieces, thin only together)
+    # every cluster and every pair of clusters starts a group (a striped cable's bands are
+    # short pieces, thin only together; its colours' pairs may all rank below a table's
+    # grout, so the best few starts are not enough), the best first
     singles = [((k,), score([k])) for k in range(clusters)]
     pairs = [((a, b), score([a, b])) for a in range(clusters) for b in range(a + 1, clusters)]
-    starts = sorted(singles, key=lambda item: -item[1])[:keep + 1] + \
-        sorted(pairs, key=lambda item: -item[1])[:keep + 1]
+    starts = sorted(singles, key=lambda item: -item[1]) + sorted(pairs, key=lambda item: -item[1])
     groups = {}
     for start, value in starts:
         members, best = list(start), value
