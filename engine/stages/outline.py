@@ -126,11 +126,6 @@ def outline_classifier():
     return OutlineClassifier.from_dict(json.loads(WEIGHTS.read_text()))
 
 
-def _disc(radius):
-    size = 2 * int(radius) + 1
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
-
-
 def _window_sums(image, where, window, flat):
     """Sums of the colours of ``where``'s pixels (``image`` uint8) in a ``window``-wide square
     around the pixels ``flat``, and how many they are (float32, exact: integer sums).
@@ -190,15 +185,14 @@ def outline_features(mask, image_rgb, width):
         return np.zeros(0, np.int64), np.zeros((0, FEATURES), np.float32)
     cable = np.ascontiguousarray(mask[box]).view(np.uint8)
     image = np.ascontiguousarray(image_rgb[box])
-    inner = cv2.erode(cable, _disc(REACH), borderType=cv2.BORDER_CONSTANT, borderValue=0) > 0
-    outer = cv2.dilate(cable, _disc(REACH)) == 0
+    inside, outside = _distances(cable)
+    inner, outer = inside > REACH, outside > REACH
     flat, nx, ny = _band_normals(cable, ~(inner | outer))
     rows, cols = np.divmod(flat, cable.shape[1])
-    cable_colour, background = _colours_around(cable, image, inner, outer, flat, width, window)
+    cable_colour, background = _colours_around(image, inside, outside, flat, width, window)
     profile = sample_at(image.astype(np.float32), cols[:, None] + STEPS * nx[:, None],
                         rows[:, None] + STEPS * ny[:, None])
-    depth = (cv2.distanceTransform(cable, cv2.DIST_L2, cv2.DIST_MASK_5).ravel()[flat]
-             - cv2.distanceTransform(1 - cable, cv2.DIST_L2, cv2.DIST_MASK_5).ravel()[flat])
+    depth = inside.ravel()[flat] - outside.ravel()[flat]
     features = np.empty((len(flat), FEATURES), np.float32)
     for column, values in zip(range(0, FEATURES, len(STEPS)),
                               _profile_features(profile, cable_colour, background)):
@@ -223,14 +217,24 @@ def _band_normals(cable, band):
     return flat[usable], out_x[usable] / norm, out_y[usable] / norm
 
 
-def _colours_around(cable, image, inner, outer, flat, width, window):
+def _distances(cable):
+    """Each pixel's distance (pixels, float32) to the nearest pixel outside the mask (0 off
+    it; the frame's edge counts as outside: the cable's outline runs along it) and to the
+    nearest pixel of the mask (0 on it)."""
+    framed = cv2.copyMakeBorder(cable, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
+    inside = cv2.distanceTransform(framed, cv2.DIST_L2, cv2.DIST_MASK_5)[1:-1, 1:-1]
+    outside = cv2.distanceTransform(1 - cable, cv2.DIST_L2, cv2.DIST_MASK_5)
+    return np.ascontiguousarray(inside), outside
+
+
+def _colours_around(image, inside, outside, flat, width, window):
     """The cable's and the background's local colours at the pixels ``flat``: the mean of the
     mask's pixels right inside the band (a glossy cable's highlight farther in is not its
     rim's colour; the whole inside where the rim has none in the window), and of the pixels up
     to half a width beyond it."""
-    rim = inner & ~(cv2.erode(cable, _disc(REACH + 2), borderType=cv2.BORDER_CONSTANT,
-                              borderValue=0) > 0)
-    beyond = outer & (cv2.dilate(cable, _disc(REACH + width // 2)) > 0)
+    inner = inside > REACH
+    rim = inner & (inside <= REACH + 2)
+    beyond = (outside > REACH) & (outside <= REACH + width // 2)
     rim_total, rim_count = _window_sums(image, rim, window, flat)
     cable_colour = _mean(rim_total, rim_count)
     alone = rim_count == 0
