@@ -110,7 +110,7 @@ def test_each_cable_is_drawn_in_its_colour_and_nothing_in_the_gap(pair_scene):
 def test_all_cables_learns_a_model_per_cable_and_masks_both(pair_scene):
     images = list(pair_scene.images)
     frames = [images[k] for k in reference_frames(len(images), 0, 3)]
-    one_colour, one_model = sequence_colour(frames)
+    _, one_model = sequence_colour(frames)
     assert not isinstance(one_model, SeveralCables)
     settings = SegmentationSettings(all_cables=True)
     colour, several = sequence_colour(frames, None, settings)

@@ -122,8 +122,8 @@ class SegmentationSettings:
         outline's classifier; 0 (the default) leaves the outline to the classifier. The
         refinement reads one colour for the whole cable, so on a two-tone cable it takes the
         edge between its two colours for the outline and cuts a side off; with it on, the
-        classifier (learnt on masks without it) decides the outline less well (mean IoU on
-        the tuning looks 0.9296 without, 0.9242 with it and the classifier learnt with it).
+        classifier (learnt on masks without it) decides the outline less well (README,
+        *The outline left to the classifier*).
     edge_contrast : float
         An edge pixel is re-decided only where the local cable and background colours differ
         by at least this much (RGB distance, 8-bit levels).
