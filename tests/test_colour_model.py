@@ -64,7 +64,7 @@ def test_the_model_looks_colours_up_as_its_histograms_say():
     assert np.abs(probability - expected).max() <= 1.0
 
 
-@pytest.mark.parametrize("family", ["pale", "air", "neutral", "patterned", "clutter"])
+@pytest.mark.parametrize("family", ["pale", "air", "neutral", "patterned"])
 def test_the_cable_is_found_on_every_look(family):
     scene = look_scene(family, 0, views=10, width=640, height=480)
     frames = [scene.images[k] for k in reference_frames(10, 0, 3)]
@@ -76,11 +76,36 @@ def test_the_cable_is_found_on_every_look(family):
     assert (found & truth).sum() > 0.3 * truth.sum()
 
 
+def test_the_cable_is_found_among_objects_of_other_colours():
+    # clutter tuning seed 0: a green cable among objects, one of a green close to its shade
+    # side's. The chosen clusters hold that object's pixels too (48% of them on the cable at
+    # this size; 72% before the candidates were scored with one-pixel gaps closed), but its
+    # shape keeps the object out of the masks
+    scene = look_scene("clutter", 0, views=10, width=640, height=480)
+    colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
+    ious = [iou(segment_frame(image, colour, model=model).mask, truth)
+            for image, truth in zip(scene.images, scene.masks)]
+    assert np.mean(ious) > 0.85
+    assert np.mean(ious) > np.mean([iou(naive_mask(i), t)
+                                    for i, t in zip(scene.images, scene.masks)]) + 0.3
+
+
 def test_a_striped_cable_is_found_when_none_of_its_colours_pairs_ranks_high():
     # blue and white stripes on green tiles (tuning seed 16): each stripe colour alone, and
     # each pair of the cable's four colour clusters, is less cable-like than the tiles'
     # grout, so a search started from the best few clusters and pairs chose the grout
     scene = look_scene("patterned", 16, views=10, width=640, height=480)
+    _, candidate = find_cable([scene.images[k] for k in reference_frames(10, 0, 3)])
+    found, truth = candidate.select_rgb(scene.images[0]), scene.masks[0]
+    assert (found & truth).sum() > 0.8 * found.sum()
+    assert (found & truth).sum() > 0.6 * truth.sum()
+
+
+def test_a_striped_cable_whose_bands_meet_in_a_line_of_the_table_s_colour_is_found():
+    # orange and cyan stripes on teal tiles (patterned tuning seed 54): at the scoring size
+    # the bands meet in a pixel of a mixed colour, a tile's cluster, so the cable's clusters
+    # were eighty short pieces and the tiles' grout (a net, penalised) still scored higher
+    scene = look_scene("patterned", 54, views=10, width=640, height=480)
     _, candidate = find_cable([scene.images[k] for k in reference_frames(10, 0, 3)])
     found, truth = candidate.select_rgb(scene.images[0]), scene.masks[0]
     assert (found & truth).sum() > 0.8 * found.sum()
@@ -399,3 +424,36 @@ def test_a_frame_whose_cable_came_out_thin_gets_the_sequence_s_width():
                                                              scene.masks[k]) + 0.04, k
         else:
             assert np.array_equal(found[k].mask, alone[k].mask)
+
+
+def _striped_cable_with_shadow(seed):
+    """A cable (a sine curve, 10 px) striped blue and the table's own grey-green (bands 12 px
+    long) on a noisy table, its hard shadow 6 px wide below it: its blue bands are short
+    pieces, thin only joined by the shadow."""
+    rng = np.random.default_rng(seed)
+    table = np.array((135, 144, 133))
+    image = np.clip(rng.normal(0, 3, (240, 320, 3)) + table, 0, 255)
+    cable, dark = _sine_bands(seed, (-5, 5), (5, 11))
+    dark &= ~cable
+    image[dark] *= 0.45
+    blue = cable & ((np.arange(320) // 12) % 2 == 0)[None, :]
+    image[blue] = (28, 20, 120)
+    return image.astype(np.uint8), cable, blue
+
+
+def test_the_shadow_a_striped_cable_casts_is_not_its_colour():
+    """The blue bands and the shadow below them are one thin object, so the greedy grouping
+    takes the shadow's cluster in with the blue (patterned tuning seed 62: the colour model
+    then learnt the shadow's grey, the seed came out half as wide as the cable and its range
+    missed the blue). The shadow's cluster shapes the pieces but is not the cable's colour."""
+    from engine.stages.colour_model import without_its_shadow  # noqa: F401 (public)
+    from engine.stages.segmentation import colour_seed, hsv_image
+
+    frames, cables, blues = zip(*(_striped_cable_with_shadow(seed) for seed in range(3)))
+    colour, candidate = find_cable(frames)
+    for frame, cable, blue in zip(frames, cables, blues):
+        seed, _, width = colour_seed(frame, candidate)
+        assert (seed & cable).sum() >= 0.95 * seed.sum()
+        assert (seed & blue).sum() >= 0.8 * blue.sum()
+        assert 7 <= width <= 11  # the blue bands, not the shadow or a speck
+    assert colour.select(hsv_image(frames[0]))[blues[0]].mean() >= 0.9

@@ -71,17 +71,17 @@ def test_a_striped_cables_second_colour_joins_its_seed():
 
 
 def test_a_striped_cable_is_segmented_whole():
-    # a tuning look: blue and beige bands, each two widths long, on a dark printed table
+    # a tuning look: blue and beige bands, each two widths long, on a dark printed table. The
+    # automatic choice found the blue bands alone, and the closing of this module made the
+    # mask whole (0.30 -> 0.88 IoU); since the choice scores its candidates with one-pixel
+    # gaps closed (colour_model.shaped) it finds both colours, and the mask is whole either way
     scene = look_scene("patterned", 7, views=4, width=640, height=480)
     images, truth = list(scene.images), scene.masks[3]
-    ious = {}
     for reach in (0.0, SegmentationSettings().stripe_reach):
         settings = replace(SegmentationSettings(), stripe_reach=reach)
         colour, model = sequence_colour(images[:3], None, settings)
         mask = segment_frame(images[3], colour, settings, model=model).mask  # not learnt on
-        ious[reach] = (mask & truth).sum() / (mask | truth).sum()
-    assert ious[0.0] < 0.5  # the blue bands
-    assert ious[SegmentationSettings().stripe_reach] > 0.75
+        assert (mask & truth).sum() / (mask | truth).sum() > 0.75
 
 
 @pytest.mark.parametrize("case", ["close strands", "shadow in the gaps"])

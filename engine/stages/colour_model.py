@@ -10,8 +10,11 @@ Here a box (set by hand, picked, or found automatically) only *seeds* the cable:
    a candidate cable: how much of it is *thin* (long connected pieces of one width, at most a
    few percent of the frame), how long those pieces are, and how much it stands out from what
    lies around it, chromaticity counting double (a shadow has its surface's chromaticity, only
-   darker; a coloured cable does not). The best candidate's pixels, with the shade side beside
-   them (:func:`engine.stages.segmentation.colour_seed`), give the HSV box.
+   darker; a coloured cable does not). A candidate's pixels are scored with one-pixel gaps
+   closed (:func:`shaped`: a striped cable's bands meet in mixed pixels of other colours).
+   The best candidate without the clusters of the shadow it casts (:func:`without_its_shadow`),
+   its pixels with the shade side beside them
+   (:func:`engine.stages.segmentation.colour_seed`), give the HSV box.
 2. :class:`ColourModel`: the box's thin pieces on a few frames are the cable's samples, the
    pixels well away from them the background's; their colour histograms (RGB, smoothed) give
    each colour's probability of being cable, looked up per pixel (a histogram back-projection,
@@ -31,7 +34,7 @@ from ..errors import ReconstructionError
 from .colour_range import ColourRange, hsv_image
 
 __all__ = ["ColourModel", "find_cable", "find_cables", "range_of", "thin_pieces", "reduced",
-           "colour_candidates", "CableCandidate", "opened", "samples"]
+           "colour_candidates", "CableCandidate", "opened", "shaped", "samples"]
 
 #: Frames are clustered and scored at this size (the longer side, pixels); larger frames are
 #: also tried at twice, four times... the size, and a larger size is chosen when its best
@@ -54,6 +57,11 @@ _HUED = 50
 #: :func:`find_cables`: another cable grouped with a found one holds at least this share of
 #: the group's pixels.
 _PART = 0.2
+#: :func:`without_its_shadow`: a candidate's cluster at least this shadow-like
+#: (:func:`_shadow_likeness`) and this far in chromaticity from its other clusters is the
+#: shadow the cable casts.
+_CAST = 0.5
+_OTHER_CHROMA = 0.08
 
 
 def reduced(image_rgb, size=_SMALL):
@@ -181,17 +189,28 @@ def opened(mask):
     return cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_OPEN, cross) > 0
 
 
+def shaped(mask):
+    """A candidate's pixels as they are scored: closed by a 3x3 cross, then :func:`opened`.
+    A striped cable's bands meet in a line of mixed pixels, often of a table's colour: each
+    band alone is a short piece, and the cable is thin only with those lines bridged."""
+    cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
+    return opened(cv2.morphologyEx(mask.view(np.uint8), cv2.MORPH_CLOSE, cross) > 0)
+
+
 def _chromaticity(rgb):
     rgb = np.asarray(rgb, dtype=np.float32)
     return rgb[..., :2] / np.maximum(rgb.sum(axis=-1, keepdims=True), 1.0)
 
 
-def _shadow_likeness(small, mask):
+def _shadow_likeness(small, mask, beside=None):
     """0 to 1: how much a cluster looks like a shadow: the chromaticity of what lies around
-    it, only darker (a shadow changes the light, not the surface)."""
+    it (but for ``beside``'s pixels), only darker (a shadow changes the light, not the
+    surface)."""
     if not mask.any():
         return 0.0
     ring = (cv2.dilate(mask.view(np.uint8), np.ones((7, 7), np.uint8)) > 0) & ~mask
+    if beside is not None:
+        ring &= ~beside
     if not ring.any():
         return 0.0
     inside, outside = np.median(small[mask], axis=0), np.median(small[ring], axis=0)
@@ -214,16 +233,25 @@ class CableCandidate:
         is one of ``members``.
     mask : ndarray of bool
         Its pixels at the scoring size.
+    shadow : tuple of int
+        Clusters of the shadow the cable casts (:func:`without_its_shadow`): not the cable's
+        colours, but the cable's pieces are thin together with them.
     """
 
     score: float
     members: tuple
     centres: np.ndarray
     mask: np.ndarray
+    shadow: tuple = ()
 
     def select_rgb(self, image_rgb):
         """The candidate's pixels in a frame (any size)."""
         return np.isin(_nearest(_lab(image_rgb), self.centres), self.members)
+
+    def select_with_shadow_rgb(self, image_rgb):
+        """The candidate's pixels in a frame and those of its :attr:`shadow` clusters."""
+        nearest = _nearest(_lab(image_rgb), self.centres)
+        return np.isin(nearest, self.members), np.isin(nearest, self.shadow)
 
 
 def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3, size=_SMALL):
@@ -266,7 +294,7 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3, size=_SMALL):
         if sum(coverage[k] for k in key) > _MAX_COVERAGE:  # too much of the frame
             return 0.0
         if key not in scored:
-            value = _score(opened(np.any([single[k] for k in key], axis=0)), lab,
+            value = _score(shaped(np.any([single[k] for k in key], axis=0)), lab,
                            diagonal)
             scored[key] = value * float(np.prod([penalty[k] for k in key]))
         return scored[key]
@@ -291,8 +319,49 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3, size=_SMALL):
         groups[tuple(sorted(members))] = best
     ranked = sorted(groups.items(), key=lambda item: -item[1])[:keep]
     return small, [CableCandidate(value, members, centres,
-                                  opened(np.any([single[k] for k in members], axis=0)))
+                                  shaped(np.any([single[k] for k in members], axis=0)))
                    for members, value in ranked]
+
+
+def without_its_shadow(candidate, small):
+    """A candidate without its clusters that are a shadow the cable casts: a cluster that is
+    its surroundings' chromaticity only darker (:func:`_shadow_likeness` of at least
+    :data:`_CAST`, the candidate's other pixels left out of the surroundings) and of another
+    chromaticity than the candidate's other clusters (:data:`_OTHER_CHROMA`: a colourless
+    cable's shade side is its own chromaticity, and stays). A cable's dark shadow ring on a
+    pale table is as thin as the cable and hugs it, so the greedy grouping takes it in; it
+    then teaches the colour model the shadow's grey and halves the seed's width.
+
+    Parameters
+    ----------
+    candidate : CableCandidate
+    small : ndarray
+        The frame at the candidate's scoring size (RGB).
+
+    Returns
+    -------
+    CableCandidate
+        ``candidate`` itself when no cluster is dropped.
+    """
+    if len(candidate.members) < 2:
+        return candidate
+    labels = _nearest(_lab(small), candidate.centres)
+    group = np.isin(labels, candidate.members)
+    parts = {k: candidate.mask & (labels == k) for k in candidate.members}
+    kept = []
+    for k, part in parts.items():
+        rest = candidate.mask & ~part
+        if part.any() and rest.any() and _shadow_likeness(small, part, group) >= _CAST:
+            gap = np.linalg.norm(_chromaticity(np.median(small[part], axis=0))
+                                 - _chromaticity(np.median(small[rest], axis=0)))
+            if gap >= _OTHER_CHROMA:
+                continue
+        kept.append(k)
+    if len(kept) == len(candidate.members) or not kept:
+        return candidate
+    return CableCandidate(candidate.score, tuple(kept), candidate.centres,
+                          candidate.mask & np.isin(labels, kept),
+                          tuple(k for k in candidate.members if k not in kept))
 
 
 def range_of(hsv_pixels, *, shade=0.5):
@@ -352,7 +421,7 @@ def find_cable(images_rgb):
         No candidate is thin (no cable pixels).
     """
     small, candidates, totals = _ranked(list(images_rgb), keep=3)
-    best = candidates[int(np.argmax(totals))]
+    best = without_its_shadow(candidates[int(np.argmax(totals))], small)
     return range_of(hsv_image(small)[best.mask]), best
 
 
@@ -376,7 +445,7 @@ def find_cables(images_rgb):
     """
     small, candidates, totals = _ranked(list(images_rgb), keep=_MORE)
     hsv = hsv_image(small)
-    best = candidates[int(np.argmax(totals))]
+    best = without_its_shadow(candidates[int(np.argmax(totals))], small)
     found, taken = [(range_of(hsv[best.mask]), best)], set(best.members)
     hues = [_hue_of(hsv[best.mask])]
     reference = max(totals)
@@ -477,7 +546,7 @@ def _ranked(images_rgb, keep, size=None):
         diagonal = math.hypot(*other.shape[:2])
         labels = _nearest(other_lab, candidates[0].centres)
         for index, candidate in enumerate(candidates):
-            totals[index] += _score(opened(np.isin(labels, candidate.members)), other_lab,
+            totals[index] += _score(shaped(np.isin(labels, candidate.members)), other_lab,
                                     diagonal)
     return small, candidates, totals
 

@@ -30,8 +30,8 @@ import cv2
 import numpy as np
 
 from ..settings import check_settings, setting
-from .colour_model import (_HUE_APART, _HUED, ColourModel, _hue_gap, find_cable, find_cables,
-                           opened, range_of, reduced, samples, thin_pieces)
+from .colour_model import (_HUE_APART, _HUED, CableCandidate, ColourModel, _hue_gap, find_cable,
+                           find_cables, opened, range_of, reduced, samples, shaped, thin_pieces)
 from .colour_range import ColourRange, hsv_image
 from .missing_side import with_missing_side
 from .outline import classify_outline
@@ -544,7 +544,9 @@ def _fill_highlights(mask, hsv, width):
 def colour_seed(image_rgb, colour, settings=SegmentationSettings()):
     """The cable's sure pixels in a frame: the thin pieces of a colour range's (or a found
     candidate's) pixels with their shade side (:func:`_with_shade`); the pieces shaped like
-    objects; the cable's width.
+    objects; the cable's width. A found candidate's pieces are shaped as they were scored
+    (:func:`engine.stages.colour_model.shaped`, with its shadow's clusters), and only its own
+    colours' pixels in them are the seed.
 
     Parameters
     ----------
@@ -557,8 +559,13 @@ def colour_seed(image_rgb, colour, settings=SegmentationSettings()):
     seed, objects : ndarray of bool
     width : float
     """
-    labels, thin, half_width, area = thin_pieces(opened(colour.select_rgb(image_rgb)))
-    seed = thin[labels]
+    if isinstance(colour, CableCandidate):  # shaped as it was scored, with its shadow
+        selected, cast = colour.select_with_shadow_rgb(image_rgb)
+        labels, thin, half_width, area = thin_pieces(shaped(selected | cast))
+        seed = opened(thin[labels] & selected)
+    else:
+        labels, thin, half_width, area = thin_pieces(opened(colour.select_rgb(image_rgb)))
+        seed = thin[labels]
     width = cable_width(seed)
     objects = ~thin & (half_width > 0.5 * width) & (area > 4 * width * width)
     objects[0] = False
