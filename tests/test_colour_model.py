@@ -90,22 +90,15 @@ def test_the_cable_is_found_among_objects_of_other_colours():
                                     for i, t in zip(scene.images, scene.masks)]) + 0.3
 
 
-def test_a_striped_cable_is_found_when_none_of_its_colours_pairs_ranks_high():
-    # blue and white stripes on green tiles (tuning seed 16): each stripe colour alone, and
-    # each pair of the cable's four colour clusters, is less cable-like than the tiles'
-    # grout, so a search started from the best few clusters and pairs chose the grout
-    scene = look_scene("patterned", 16, views=10, width=640, height=480)
-    _, candidate = find_cable([scene.images[k] for k in reference_frames(10, 0, 3)])
-    found, truth = candidate.select_rgb(scene.images[0]), scene.masks[0]
-    assert (found & truth).sum() > 0.8 * found.sum()
-    assert (found & truth).sum() > 0.6 * truth.sum()
-
-
-def test_a_striped_cable_whose_bands_meet_in_a_line_of_the_table_s_colour_is_found():
-    # orange and cyan stripes on teal tiles (patterned tuning seed 54): at the scoring size
-    # the bands meet in a pixel of a mixed colour, a tile's cluster, so the cable's clusters
-    # were eighty short pieces and the tiles' grout (a net, penalised) still scored higher
-    scene = look_scene("patterned", 54, views=10, width=640, height=480)
+@pytest.mark.parametrize("seed", [16, 54], ids=["no pair ranks high", "bands a pixel apart"])
+def test_a_striped_cable_is_found_not_the_tiles_grout(seed):
+    # 16: blue and white stripes on green tiles: each stripe colour alone, and each pair of
+    # the cable's four colour clusters, is less cable-like than the tiles' grout, so a search
+    # started from the best few clusters and pairs chose the grout.
+    # 54: orange and cyan stripes on teal tiles: at the scoring size the bands meet in a pixel
+    # of a mixed colour, a tile's cluster, so the cable's clusters were eighty short pieces and
+    # the grout (a net, penalised) still scored higher, until one-pixel gaps were closed
+    scene = look_scene("patterned", seed, views=10, width=640, height=480)
     _, candidate = find_cable([scene.images[k] for k in reference_frames(10, 0, 3)])
     found, truth = candidate.select_rgb(scene.images[0]), scene.masks[0]
     assert (found & truth).sum() > 0.8 * found.sum()
