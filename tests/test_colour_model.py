@@ -77,10 +77,10 @@ def test_the_cable_is_found_on_every_look(family):
 
 
 def test_the_cable_is_found_among_objects_of_other_colours():
-    # clutter tuning seed 0: a green cable among objects, one of a green close to its shade
-    # side's. The chosen clusters hold that object's pixels too (48% of them on the cable at
-    # this size; 72% before the candidates were scored with one-pixel gaps closed), but its
-    # shape keeps the object out of the masks
+    # clutter tuning seed 0: a green cable among objects, two of them green boxes. The chosen
+    # clusters hold the boxes' pixels too (48% of them on the cable at this size; 72% before
+    # the candidates were scored with one-pixel gaps closed), but their shape keeps the boxes
+    # out of the masks
     scene = look_scene("clutter", 0, views=10, width=640, height=480)
     colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
     ious = [iou(segment_frame(image, colour, model=model).mask, truth)
@@ -439,7 +439,6 @@ def test_the_shadow_a_striped_cable_casts_is_not_its_colour():
     takes the shadow's cluster in with the blue (patterned tuning seed 62: the colour model
     then learnt the shadow's grey, the seed came out half as wide as the cable and its range
     missed the blue). The shadow's cluster shapes the pieces but is not the cable's colour."""
-    from engine.stages.colour_model import without_its_shadow  # noqa: F401 (public)
     from engine.stages.segmentation import colour_seed, hsv_image
 
     frames, cables, blues = zip(*(_striped_cable_with_shadow(seed) for seed in range(3)))
