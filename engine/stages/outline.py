@@ -189,7 +189,8 @@ def outline_features(mask, image_rgb, width):
     inner, outer = inside > REACH, outside > REACH
     flat, nx, ny = _band_normals(cable, ~(inner | outer))
     rows, cols = np.divmod(flat, cable.shape[1])
-    cable_colour, background = _colours_around(image, inside, outside, flat, width, window)
+    cable_colour, background = _colours_around(image, inside, outside, inner, flat, width,
+                                               window)
     profile = sample_at(image.astype(np.float32), cols[:, None] + STEPS * nx[:, None],
                         rows[:, None] + STEPS * ny[:, None])
     depth = inside.ravel()[flat] - outside.ravel()[flat]
@@ -227,12 +228,12 @@ def _distances(cable):
     return np.ascontiguousarray(inside), outside
 
 
-def _colours_around(image, inside, outside, flat, width, window):
+def _colours_around(image, inside, outside, inner, flat, width, window):
     """The cable's and the background's local colours at the pixels ``flat``: the mean of the
     mask's pixels right inside the band (a glossy cable's highlight farther in is not its
     rim's colour; the whole inside where the rim has none in the window), and of the pixels up
-    to half a width beyond it."""
-    inner = inside > REACH
+    to half a width beyond it. ``inner``: the mask's pixels past the band (``inside`` over
+    :data:`REACH`)."""
     rim = inner & (inside <= REACH + 2)
     beyond = (outside > REACH) & (outside <= REACH + width // 2)
     rim_total, rim_count = _window_sums(image, rim, window, flat)
