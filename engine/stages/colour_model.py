@@ -11,7 +11,9 @@ Here a box (set by hand, picked, or found automatically) only *seeds* the cable:
    few percent of the frame), how long those pieces are, and how much it stands out from what
    lies around it, chromaticity counting double (a shadow has its surface's chromaticity, only
    darker; a coloured cable does not). A candidate's pixels are scored with one-pixel gaps
-   closed (:func:`shaped`: a striped cable's bands meet in mixed pixels of other colours).
+   closed (:func:`shaped`: a striped cable's bands meet in mixed pixels of other colours),
+   unless the closing widens its pieces: then it joined something beside the cable, and the
+   candidate scores no better than without it (:func:`_shaped_score`).
    The best candidate without the clusters of the shadow it casts (:func:`without_its_shadow`),
    its pixels with the shade side beside them
    (:func:`engine.stages.segmentation.colour_seed`), give the HSV box.
@@ -62,6 +64,9 @@ _PART = 0.2
 #: shadow the cable casts.
 _CAST = 0.5
 _OTHER_CHROMA = 0.08
+#: :func:`_shaped_score`: a closing that makes a candidate's pieces this many times wider (on
+#: average, weighted by area) joined something beside the cable, not bands end to end.
+_WIDENED = 1.1
 
 
 def reduced(image_rgb, size=_SMALL):
@@ -190,11 +195,31 @@ def opened(mask):
 
 
 def shaped(mask):
-    """A candidate's pixels as they are scored: closed by a 3x3 cross, then :func:`opened`.
-    A striped cable's bands meet in a line of mixed pixels, often of a table's colour: each
-    band alone is a short piece, and the cable is thin only with those lines bridged."""
+    """A candidate's pixels as they are scored (:func:`_shaped_score`): closed by a 3x3 cross,
+    then :func:`opened`. A striped cable's bands meet in a line of mixed pixels, often of a
+    table's colour: each band alone is a short piece, and the cable is thin only with those
+    lines bridged."""
     cross = cv2.getStructuringElement(cv2.MORPH_CROSS, (3, 3))
     return opened(cv2.morphologyEx(mask.view(np.uint8), cv2.MORPH_CLOSE, cross) > 0)
+
+
+def _shaped_score(mask, lab, diagonal):
+    """A candidate's :func:`_score` on its pixels as :func:`shaped` makes them, but no more
+    than on the plain :func:`opened` pixels when the closing widens the pieces
+    (:data:`_WIDENED`). Bands bridged end to end keep the cable's width; a line along the
+    cable's edge, one pixel off it (a hard light's rim, a cluster of mixed edge pixels), is
+    joined to it side by side and widens it, and must not make its cluster the cable's."""
+    closed, plain = shaped(mask), opened(mask)
+    value = _score(closed, lab, diagonal)
+    if _mean_width(closed) > _WIDENED * _mean_width(plain):
+        value = min(value, _score(plain, lab, diagonal))
+    return value
+
+
+def _mean_width(mask):
+    """The mean width of a mask's connected pieces (pixels), weighted by their areas."""
+    _, _, half_width, area = thin_pieces(mask)
+    return 2.0 * float(np.average(half_width[1:], weights=area[1:])) if area[1:].any() else 0.0
 
 
 def _chromaticity(rgb):
@@ -294,8 +319,7 @@ def colour_candidates(image_rgb, *, clusters=_CLUSTERS, keep=3, size=_SMALL):
         if sum(coverage[k] for k in key) > _MAX_COVERAGE:  # too much of the frame
             return 0.0
         if key not in scored:
-            value = _score(shaped(np.any([single[k] for k in key], axis=0)), lab,
-                           diagonal)
+            value = _shaped_score(np.any([single[k] for k in key], axis=0), lab, diagonal)
             scored[key] = value * float(np.prod([penalty[k] for k in key]))
         return scored[key]
 
@@ -546,8 +570,8 @@ def _ranked(images_rgb, keep, size=None):
         diagonal = math.hypot(*other.shape[:2])
         labels = _nearest(other_lab, candidates[0].centres)
         for index, candidate in enumerate(candidates):
-            totals[index] += _score(shaped(np.isin(labels, candidate.members)), other_lab,
-                                    diagonal)
+            totals[index] += _shaped_score(np.isin(labels, candidate.members), other_lab,
+                                           diagonal)
     return small, candidates, totals
 
 
