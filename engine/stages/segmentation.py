@@ -985,6 +985,14 @@ def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
     if settings.outline_passes > 0:
         mask = classify_outline(mask, image_rgb, width, passes=settings.outline_passes)
         width = _at_least(cable_width(mask), least_width)
+        # searched again: the classifier took the mixed pixels between a two-tone cable's
+        # found side and its missed one for the table, and the missed side's strip now
+        # reaches beyond the rim (see engine.stages.missing_side)
+        sided = with_missing_side(mask, image_rgb, width, reach=settings.side_reach,
+                                  chroma_gap=settings.side_chroma,
+                                  contrast=settings.side_contrast, contact=settings.side_contact)
+        if sided is not mask:
+            mask, width = sided, _at_least(cable_width(sided), least_width)
     return mask, colour_range_mask, width
 
 
