@@ -121,12 +121,13 @@ def thin_pieces(mask, *, min_elongation=8.0, min_area=12):
     return labels, thin, half_width, area
 
 
-def _score(mask, lab, diagonal):
-    """How cable-like a candidate mask is (see the module docstring); 0 if not at all."""
+def _score(mask, lab, diagonal, pieces=None):
+    """How cable-like a candidate mask is (see the module docstring); 0 if not at all.
+    ``pieces``: the mask's :func:`thin_pieces`, when already known."""
     coverage = mask.mean()
     if coverage < 5e-4 or coverage > _MAX_COVERAGE:
         return 0.0
-    labels, thin, half_width, area = thin_pieces(mask)
+    labels, thin, half_width, area = thin_pieces(mask) if pieces is None else pieces
     thin_area = area[thin].sum()
     thin_share = thin_area / max(mask.sum(), 1)
     if not thin.any():
@@ -210,15 +211,17 @@ def _shaped_score(mask, lab, diagonal):
     cable's edge, one pixel off it (a hard light's rim, a cluster of mixed edge pixels), is
     joined to it side by side and widens it, and must not make its cluster the cable's."""
     closed, plain = shaped(mask), opened(mask)
-    value = _score(closed, lab, diagonal)
-    if _mean_width(closed) > _WIDENED * _mean_width(plain):
-        value = min(value, _score(plain, lab, diagonal))
+    closed_pieces, plain_pieces = thin_pieces(closed), thin_pieces(plain)
+    value = _score(closed, lab, diagonal, closed_pieces)
+    if _mean_width(closed_pieces) > _WIDENED * _mean_width(plain_pieces):
+        value = min(value, _score(plain, lab, diagonal, plain_pieces))
     return value
 
 
-def _mean_width(mask):
-    """The mean width of a mask's connected pieces (pixels), weighted by their areas."""
-    _, _, half_width, area = thin_pieces(mask)
+def _mean_width(pieces):
+    """The mean width (pixels) of a mask's connected pieces (its :func:`thin_pieces`),
+    weighted by their areas."""
+    _, _, half_width, area = pieces
     return 2.0 * float(np.average(half_width[1:], weights=area[1:])) if area[1:].any() else 0.0
 
 
