@@ -108,8 +108,9 @@ def test_a_striped_cable_is_found_not_the_tiles_grout(seed):
 def test_a_line_along_the_cable_s_edge_is_not_joined_to_it():
     # hard light tuning seed 2 (the pipeline's 24 views): a dark green cluster, half of it a
     # one-pixel line along the cable's edge, one pixel off it. Closed, that line widened the
-    # cable and its cluster outscored the shade side's, which then covered half the cable in
-    # the first frame; a closing that widens the pieces no longer raises a candidate's score
+    # cable and its cluster outscored the shade side's in the chosen group, whose colours then
+    # covered half the cable in the first frame; a closing that widens the pieces no longer
+    # raises a candidate's score
     scene = look_scene("hard_light", 2, views=24, width=960, height=720)
     frames = reference_frames(24, 0, 3)
     _, candidate = find_cable([scene.images[k] for k in frames])

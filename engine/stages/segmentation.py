@@ -192,8 +192,9 @@ class SegmentationSettings:
         (:func:`engine.stages.missing_side.with_missing_side`): pixels within ``side_reach``
         cable widths of the mask's thin pieces that differ from the background around them
         by more than ``side_chroma`` in chromaticity and ``side_contrast`` in colour, in
-        pieces that run along the mask for at least ``side_contact`` cable widths;
-        ``side_reach`` 0 turns it off. Not with ``all_cables``.
+        pieces that run along the mask for at least ``side_contact`` cable widths; searched
+        before the outline's classifier and again after it (``outline_passes`` over 0).
+        ``side_reach`` 0 turns both off. Not with ``all_cables``.
     outline_passes : int
         The pixels within two pixels of the mask's outline are decided by a classifier learnt
         on synthetic looks (:mod:`engine.stages.outline`), this many times, each around the
