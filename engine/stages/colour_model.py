@@ -8,12 +8,10 @@ Here a box (set by hand, picked, or found automatically) only *seeds* the cable:
 1. :func:`find_cable` (automatic): the frame's colours are clustered (k-means in Lab)
    and every cluster, and every pair of clusters (a cable's lit and shade sides), is scored as
    a candidate cable: how much of it is *thin* (long connected pieces of one width, at most a
-   few percent of the frame), how long those pieces are, and how much its pixels stand out
-   from what lies around it (the median of each pixel's difference from the surroundings'
-   colour: a two-tone cable's colours each stand out), chromaticity counting double (a shadow
-   has its surface's chromaticity, only darker; a coloured cable does not). A candidate's
-   pixels are scored with one-pixel gaps closed (:func:`shaped`: a striped cable's bands
-   meet in mixed pixels of other colours),
+   few percent of the frame), how long those pieces are, and how much it stands out from what
+   lies around it, chromaticity counting double (a shadow has its surface's chromaticity, only
+   darker; a coloured cable does not). A candidate's pixels are scored with one-pixel gaps
+   closed (:func:`shaped`: a striped cable's bands meet in mixed pixels of other colours),
    unless the closing widens its pieces: then it joined something beside the cable, and the
    candidate scores no better than without it (:func:`_shaped_score`).
    The best candidate without the clusters of the shadow it casts (:func:`without_its_shadow`),
@@ -144,11 +142,9 @@ def _score(mask, lab, diagonal, pieces=None):
         cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))) > 0) & ~mask
     if not ring.any():
         return 0.0
-    # each pixel's difference from the ring's colour, then their median: a two-tone cable's
-    # colours each stand out, while the median of its colours may be the table's
-    outside = np.median(lab[ring], axis=0).astype(np.float32)
-    apart = lab[cable].astype(np.float32) - outside
-    contrast = float(np.median(np.hypot(apart[:, 0], 2.0 * np.hypot(apart[:, 1], apart[:, 2]))))
+    inside, outside = np.median(lab[cable], axis=0), np.median(lab[ring], axis=0)
+    lightness, chroma = abs(inside[0] - outside[0]), np.hypot(*(inside[1:] - outside[1:]))
+    contrast = float(np.hypot(lightness, 2.0 * chroma))
     # a net (tiles' grout, a weave) encloses many holes; a cable only a loop per crossing
     holes = cv2.connectedComponentsWithStats((~cable).view(np.uint8), connectivity=4)[2]
     holes = int((holes[1:, cv2.CC_STAT_AREA] > 4.0 * width * width).sum()) - 1
