@@ -78,9 +78,9 @@ def test_the_cable_is_found_on_every_look(family):
 
 def test_the_cable_is_found_among_objects_of_other_colours():
     # clutter tuning seed 0: a green cable among objects, two of them green boxes. The chosen
-    # clusters hold the boxes' pixels too (48% of them on the cable at this size; 72% before
-    # the candidates were scored with one-pixel gaps closed), but their shape keeps the boxes
-    # out of the masks
+    # clusters hold other pixels too (72% of them on the cable at this size; 48% while a
+    # closing that widened the pieces still raised a candidate's score), but their shape keeps
+    # the boxes out of the masks
     scene = look_scene("clutter", 0, views=10, width=640, height=480)
     colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
     ious = [iou(segment_frame(image, colour, model=model).mask, truth)
