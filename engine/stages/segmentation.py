@@ -961,9 +961,7 @@ def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
     mask = _remove_specks(raw, half, settings.speck_area * width * width)
     # before the blobs go: a piece of an object of the cable's colour grows to the object's
     # other faces, a blob then
-    mask = with_missing_side(mask, image_rgb, width, reach=settings.side_reach,
-                             chroma_gap=settings.side_chroma, contrast=settings.side_contrast,
-                             contact=settings.side_contact)
+    mask = _with_side(mask, image_rgb, width, settings)
     if settings.blob_elongation > 0:
         mask = _drop_blobs(mask, width, settings)
     # the rest only looks at the cable and its surroundings: its box with room for a closing
@@ -989,12 +987,17 @@ def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
         # searched again: the classifier took the mixed pixels between a two-tone cable's
         # found side and its missed one for the table, and the missed side's strip now
         # reaches beyond the rim (see engine.stages.missing_side)
-        sided = with_missing_side(mask, image_rgb, width, reach=settings.side_reach,
-                                  chroma_gap=settings.side_chroma,
-                                  contrast=settings.side_contrast, contact=settings.side_contact)
+        sided = _with_side(mask, image_rgb, width, settings)
         if sided is not mask:
             mask, width = sided, _at_least(cable_width(sided), least_width)
     return mask, colour_range_mask, width
+
+
+def _with_side(mask, image_rgb, width, settings):
+    """:func:`engine.stages.missing_side.with_missing_side` with the settings' options."""
+    return with_missing_side(mask, image_rgb, width, reach=settings.side_reach,
+                             chroma_gap=settings.side_chroma, contrast=settings.side_contrast,
+                             contact=settings.side_contact)
 
 
 def _several_masks(image_rgb, several, settings, least_width=0.0):
