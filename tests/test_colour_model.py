@@ -415,11 +415,16 @@ def test_a_frame_whose_cable_came_out_thin_gets_the_sequence_s_width():
     frames' masks cover more of the cable; the others do not change. (The scene of this test
     was a grey glossy cable, tuning look neutral seed 7, whose model found only its highlight
     in three frames, until the outline's classifier was learnt on masks without the colour
-    refinement: it keeps that cable's body in every frame now.)"""
-    from engine.stages.segmentation import segment_images
+    refinement: it keeps that cable's body in every frame now.) The model is learnt once, as
+    before the second learning (``relearn``), which widens those frames' masks too (two of
+    them still come out under the floor, by less)."""
+    from dataclasses import replace
+
+    from engine.stages.segmentation import SegmentationSettings, segment_images
 
     scene = look_scene("same_hue", 1, views=10, width=960, height=720)
-    colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
+    colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)],
+                                    None, replace(SegmentationSettings(), relearn=False))
     alone = [segment_frame(frame, colour, model=model) for frame in scene.images]
     found = segment_images(scene.images, colour, model=model)
     least = 0.9 * np.median([f.width for f in alone])
@@ -432,6 +437,27 @@ def test_a_frame_whose_cable_came_out_thin_gets_the_sequence_s_width():
                                                              scene.masks[k]) + 0.04, k
         else:
             assert np.array_equal(found[k].mask, alone[k].mask)
+
+
+def test_the_model_is_learnt_again_from_the_masks_it_gives():
+    """A cable in two colours along long sections (tuning look patterned, seed 23: red and
+    white on dark print): the colour found is the red, and the first model learns the white
+    sections as background; the missing side and the outline's classifier put only some of
+    them back. Learnt again from the masks it gives on its frames, the model calls the white
+    sections cable too (mask IoU over six 640x480 views 0.70 -> 0.82)."""
+    from dataclasses import replace
+
+    from engine.stages.segmentation import SegmentationSettings
+
+    scene = look_scene("patterned", 23, views=6, width=640, height=480)
+    frames = [scene.images[k] for k in reference_frames(6, 0, 3)]
+    scores = {}
+    for relearn in (False, True):
+        settings = replace(SegmentationSettings(), relearn=relearn)
+        colour, model = sequence_colour(frames, None, settings)
+        scores[relearn] = np.mean([iou(segment_frame(image, colour, settings, model=model).mask,
+                                       truth) for image, truth in zip(scene.images, scene.masks)])
+    assert scores[False] < 0.72 and scores[True] > 0.78, scores
 
 
 def _striped_cable_with_shadow(seed):
