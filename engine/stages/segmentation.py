@@ -212,10 +212,9 @@ class SegmentationSettings:
         the least it can be (:func:`segment_all`); 0 turns this off.
     relearn : bool
         The automatically found cable's colour model is learnt a second time, from the masks
-        the first one gives on the frames it was learnt from (:func:`_relearnt`: a found
-        colour is often a band of the cable only, a glossy grey cable's highlight, and the
-        first model then takes the rest of the cable for background). Not with
-        ``all_cables``, nor with a colour given.
+        the first one gives on the frames it was learnt from: a found colour is often a band
+        of the cable only (a glossy grey cable's highlight), and the first model takes the
+        rest of the cable for background. Not with ``all_cables``, nor with a colour given.
     """
 
     speck_area: float = setting(3.0, low=0, unit="widths²")
