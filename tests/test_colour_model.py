@@ -418,13 +418,11 @@ def test_a_frame_whose_cable_came_out_thin_gets_the_sequence_s_width():
     refinement: it keeps that cable's body in every frame now.) The model is learnt once, as
     before the second learning (``relearn``), which widens those frames' masks too (two of
     them still come out under the floor, by less)."""
-    from dataclasses import replace
-
     from engine.stages.segmentation import SegmentationSettings, segment_images
 
     scene = look_scene("same_hue", 1, views=10, width=960, height=720)
     colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)],
-                                    None, replace(SegmentationSettings(), relearn=False))
+                                    None, SegmentationSettings(relearn=False))
     alone = [segment_frame(frame, colour, model=model) for frame in scene.images]
     found = segment_images(scene.images, colour, model=model)
     least = 0.9 * np.median([f.width for f in alone])
@@ -445,15 +443,13 @@ def test_the_model_is_learnt_again_from_the_masks_it_gives():
     sections as background; the missing side and the outline's classifier put only some of
     them back. Learnt again from the masks it gives on its frames, the model calls the white
     sections cable too (mask IoU over six 640x480 views 0.70 -> 0.82)."""
-    from dataclasses import replace
-
     from engine.stages.segmentation import SegmentationSettings
 
     scene = look_scene("patterned", 23, views=6, width=640, height=480)
     frames = [scene.images[k] for k in reference_frames(6, 0, 3)]
     scores = {}
     for relearn in (False, True):
-        settings = replace(SegmentationSettings(), relearn=relearn)
+        settings = SegmentationSettings(relearn=relearn)
         colour, model = sequence_colour(frames, None, settings)
         scores[relearn] = np.mean([iou(segment_frame(image, colour, settings, model=model).mask,
                                        truth) for image, truth in zip(scene.images, scene.masks)])

@@ -137,8 +137,10 @@ def fit_outline(features, labels, *, hidden=HIDDEN, decay=1e-4, iterations=500, 
 
 
 def segmented(images, settings=SegmentationSettings()):
-    """Every frame's mask and width as a run segments them, the outline's classifier off."""
-    bare = replace(settings, outline_passes=0)
+    """Every frame's mask and width as a run segments them, the outline's classifier off, and
+    the colour model learnt once (``relearn`` off): the masks the shipped weights were learnt
+    from, before the model was learnt a second time (whose first masks the classifier makes)."""
+    bare = replace(settings, outline_passes=0, relearn=False)
     frames = reference_frames(len(images), 0, bare.model_frames)
     colour, model = sequence_colour([images[k] for k in frames], None, bare)
     return [cable_mask(image, colour, bare, model=model) for image in images]
