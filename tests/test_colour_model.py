@@ -265,6 +265,20 @@ def test_a_rendered_black_cable_s_shadow_leaves_its_masks():
         assert (found & ~truth).sum() <= 0.6 * (plain & ~truth).sum()
 
 
+def test_a_grey_cable_s_soft_shadow_on_a_tinted_table_is_not_cable():
+    """A grey cable on a green table: its soft shadow is darker than the darkest quarter's
+    bound of a cable darker than its shadow, but of the table's chromaticity, and the cable's
+    is not: the shadow leaves the mask from the cable's median brightness up."""
+    from engine.stages.segmentation import SegmentationSettings, _without_shadow
+
+    for seed in range(3):
+        image, cable, dark = _cable_with_shadow(seed, table=(126, 181, 124),
+                                                cable_colour=(60, 60, 60), shadow=0.55)
+        kept = _without_shadow(cable | dark, image, 18.0, SegmentationSettings())
+        assert (kept & cable).sum() >= 0.97 * cable.sum()
+        assert (kept & dark).sum() <= 0.1 * dark.sum()
+
+
 @pytest.mark.parametrize("table, cable_colour, shadow", [
     ((150, 150, 150), (70, 70, 70), 1.0),   # a grey cable on a grey table: as dark as a shadow
     ((150, 150, 150), (200, 40, 30), 0.4),  # a red cable's own shade side is not the table's

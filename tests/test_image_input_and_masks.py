@@ -294,3 +294,19 @@ def test_a_crossing_thick_enough_to_be_an_object_is_not_dropped_as_one():
     kept = _drop_blobs(mask > 0, 5.0, SegmentationSettings())
     assert kept[:, :120].sum() == (mask[:, :120] > 0).sum()
     assert not kept[:, 150:].any()
+
+
+def test_a_ring_around_an_object_s_top_is_dropped_as_an_object():
+    """A cylinder of the cable's hue whose lit top the model misses leaves a ring of its side,
+    as thin as the cable: filled, it is a disc, and it goes. A cable's loop is as round, but
+    the cable runs on from it: it stays."""
+    from engine.stages.segmentation import _drop_blobs
+
+    mask = np.zeros((200, 400), np.uint8)
+    cv2.ellipse(mask, (80, 100), (30, 22), 10, 0, 360, 1, 10)  # the ring
+    cv2.circle(mask, (260, 80), 30, 1, 10)  # a loop, the cable running on from it
+    cv2.line(mask, (230, 80), (200, 190), 1, 10)
+    cv2.line(mask, (290, 80), (390, 190), 1, 10)
+    kept = _drop_blobs(mask > 0, 10.0, SegmentationSettings())
+    assert not kept[:, :150].any()
+    assert kept[:, 150:].sum() == (mask[:, 150:] > 0).sum()

@@ -55,6 +55,10 @@ _AROUND = 2.5
 #: (median) distance from it.
 _COLOURED, _COLOURED_SHARE, _SHADOW_GAP = 3.0, 0.25, 1.0 / 3.0
 
+#: :func:`_drop_blobs` measures a piece again with its holes smaller than this many square
+#: cable widths filled (a ring around a cylinder's top).
+_RING_HOLE = 25.0
+
 #: :func:`calibrated_level` tries the probabilities this far apart and takes the highest whose
 #: IoU of the samples is within ``_LEVEL_MARGIN`` of the best one's.
 _LEVEL_STEP, _LEVEL_MARGIN = 0.05, 0.01
@@ -816,6 +820,15 @@ def _without_shadow(mask, image_rgb, width, settings):
     background's chromaticity than :data:`_SHADOW_GAP` times the cable's median distance from
     it (and at least ``shadow_chroma``), decided pixel by pixel at full size where a
     half-size pixel may hold both.
+
+    A colourless cable on a tinted table (as many of its pixels as far from the background's
+    chromaticity, but not more saturated) keeps the rule of a cable darker than its shadow,
+    with two changes measured from those far pixels, the cable's own: a pixel near the
+    background's chromaticity (the reach of a cable with a colour of its own) is shadow from
+    the cable's median brightness up (as a share of the background's), not only from
+    ``shadow_depth`` times the darkest quarter's. A soft shadow beside a dark grey cable on a
+    green table is darker than that quarter's bound, and the mask took it whole (tuning look
+    neutral seed 14: IoU 0.83 -> 0.93).
     """
     box = _cable_box(mask, int(math.ceil(3 * width)) + 2)
     if box is None or width == 0:
@@ -887,8 +900,17 @@ def _shadow_rule(pixels, behind, share, lit, settings):
         return offset, 0.0, max(settings.shadow_chroma,
                                 _SHADOW_GAP * float(np.median(offset[coloured]))), True
     # the cable is darker than its shadow
-    return (offset, settings.shadow_depth * np.percentile(share, 25), settings.shadow_chroma,
-            False)
+    lightest = settings.shadow_depth * np.percentile(share, 25)
+    reach = settings.shadow_chroma
+    distinct = lit & (offset > _COLOURED * settings.shadow_chroma)
+    if np.count_nonzero(distinct) >= _COLOURED_SHARE * len(share):
+        # a colourless cable on a tinted table (its chromaticity is not the table's, but no
+        # more saturated): a darker pixel near the table's chromaticity is shadow unless
+        # darker than the cable's typical pixel (a soft shadow beside a dark cable is as
+        # dark as its own darkest quarter)
+        lightest = min(lightest, float(np.median(share[distinct])))
+        reach = max(reach, _SHADOW_GAP * float(np.median(offset[distinct])))
+    return offset, lightest, reach, False
 
 
 def _saturation(chroma):
@@ -923,7 +945,14 @@ def _drop_blobs(mask, width, settings):
     than ``2 * blob_thickness`` cable widths, shorter than ``blob_elongation`` widths (a
     piece's length in widths as :func:`thin_pieces` measures it) and about convex (filling
     :data:`_SOLID` of its convex hull or more: strands crossing, in a mask broken into
-    pieces, are as thick and as short, but not convex)."""
+    pieces, are as thick and as short, but not convex).
+
+    A piece is measured again with its holes under :data:`_RING_HOLE` square cable widths
+    filled: a cylinder of the cable's hue whose lit top the model misses leaves a ring of its
+    dark side, as thin as the cable, that filled is a disc (tuning looks clutter seeds 3, 5,
+    7, 12 and 14: IoU 0.88 -> 0.93, 0.92 -> 0.98, 0.92 -> 0.95, 0.87 -> 0.94, 0.91 -> 0.99).
+    A cable's loop filled is a disc too, but with the cable running on from it the piece is
+    long or not convex; only a loop broken off alone would go."""
     box = _cable_box(mask, 0)  # the pieces lie in the mask's box
     if box is None:
         return mask
@@ -934,23 +963,52 @@ def _drop_blobs(mask, width, settings):
     # own box (a distance transform over the whole frame costs more than the few pieces')
     thick = settings.blob_thickness * width
     blob = np.zeros(count, dtype=bool)
-    for piece in np.flatnonzero(area > math.pi * thick ** 2):
+    least = math.pi * thick ** 2
+    # a ring's box holds its hole
+    for piece in np.flatnonzero(stats[:, cv2.CC_STAT_WIDTH] * stats[:, cv2.CC_STAT_HEIGHT]
+                                > least):
         if piece == 0:
             continue
         x, y, w, h = stats[piece, :4]
         inside = np.pad(labels[y:y + h, x:x + w] == piece, 1)
-        distance = cv2.distanceTransform(inside.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_5)
-        if distance.max() <= thick:
-            continue
-        ridge = (distance >= cv2.dilate(distance, np.ones((3, 3), np.uint8))) & inside
-        half_width = distance[ridge].mean()
-        blob[piece] = area[piece] / max(4.0 * half_width ** 2, 1e-9) < settings.blob_elongation \
-            and _solidity(inside) >= _SOLID
+        blob[piece] = area[piece] > least and _blob_like(inside, area[piece], thick, settings)
+        if not blob[piece]:
+            filled = _holes_filled(inside, _RING_HOLE * width * width)
+            if filled is not inside:
+                blob[piece] = _blob_like(filled, np.count_nonzero(filled), thick, settings,
+                                         ring=True)
     if not blob.any():
         return mask
     kept = mask.copy()
     kept[box] &= ~blob[labels]
     return kept
+
+
+def _holes_filled(piece, max_area):
+    """``piece`` (a bool mask whose border is off it) with the holes it encloses under
+    ``max_area`` pixels filled; ``piece`` itself when it has none."""
+    _, labels, stats, _ = cv2.connectedComponentsWithStats((~piece).view(np.uint8), 4,
+                                                           cv2.CV_32S)
+    hole = stats[:, cv2.CC_STAT_AREA] < max_area
+    hole[0] = False  # the piece
+    hole[labels[0, 0]] = False  # what lies around it
+    if not hole.any():
+        return piece
+    return piece | hole[labels]
+
+
+def _blob_like(piece, area, thick, settings, *, ring=False):
+    """:func:`_drop_blobs`' test of one piece (a bool mask whose border is off it, of ``area``
+    pixels). A ring's holes filled (``ring``), its half-width is its ridge's mean weighted by
+    the ridge's distances: a filled ring's ridge is its centre and a few pixels of its ragged
+    outline, a distance or two from the edge, whose plain mean makes a disc look long."""
+    distance = cv2.distanceTransform(piece.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_5)
+    if distance.max() <= thick:
+        return False
+    ridge = distance[(distance >= cv2.dilate(distance, np.ones((3, 3), np.uint8))) & piece]
+    half_width = float((ridge ** 2).sum() / ridge.sum()) if ring else ridge.mean()
+    return area / max(4.0 * half_width ** 2, 1e-9) < settings.blob_elongation \
+        and _solidity(piece) >= _SOLID
 
 
 def _solidity(piece):
