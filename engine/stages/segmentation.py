@@ -196,7 +196,9 @@ class SegmentationSettings:
         quarter of its pixels over ``3 * shadow_chroma`` from the background's
         chromaticity, and more saturated), a shadow may be darker than the cable, and
         nearer the background's chromaticity than a third of the cable's distance from it
-        is enough.
+        is enough; of a colourless cable on a tinted table (as many pixels as far, but not
+        more saturated), that reach holds too, and a pixel is lighter than the cable from
+        those far pixels' median share up.
     side_reach, side_chroma, side_contrast, side_contact : float
         The side of the cable its colours missed is put back
         (:func:`engine.stages.missing_side.with_missing_side`): pixels within ``side_reach``
@@ -821,14 +823,14 @@ def _without_shadow(mask, image_rgb, width, settings):
     it (and at least ``shadow_chroma``), decided pixel by pixel at full size where a
     half-size pixel may hold both.
 
-    A colourless cable on a tinted table (as many of its pixels as far from the background's
-    chromaticity, but not more saturated) keeps the rule of a cable darker than its shadow,
-    with two changes measured from those far pixels, the cable's own: a pixel near the
-    background's chromaticity (the reach of a cable with a colour of its own) is shadow from
-    the cable's median brightness up (as a share of the background's), not only from
-    ``shadow_depth`` times the darkest quarter's. A soft shadow beside a dark grey cable on a
-    green table is darker than that quarter's bound, and the mask took it whole (tuning look
-    neutral seed 14: IoU 0.83 -> 0.93).
+    A colourless cable on a tinted table (a quarter of its pixels as far from the background's
+    chromaticity as a cable of its own colour's, but no more saturated than the background)
+    keeps the rule of a cable darker than its shadow, with two changes measured from those
+    far pixels, the cable's own: a pixel near the background's chromaticity (the reach of a
+    cable with a colour of its own) is shadow from the cable's median brightness up (as a
+    share of the background's), not only from ``shadow_depth`` times the darkest quarter's.
+    A soft shadow beside a dark grey cable on a green table is darker than that quarter's
+    bound, and the mask took it whole (tuning look neutral seed 14: IoU 0.83 -> 0.93).
     """
     box = _cable_box(mask, int(math.ceil(3 * width)) + 2)
     if box is None or width == 0:
@@ -904,10 +906,10 @@ def _shadow_rule(pixels, behind, share, lit, settings):
     reach = settings.shadow_chroma
     distinct = lit & (offset > _COLOURED * settings.shadow_chroma)
     if np.count_nonzero(distinct) >= _COLOURED_SHARE * len(share):
-        # a colourless cable on a tinted table (its chromaticity is not the table's, but no
-        # more saturated): a darker pixel near the table's chromaticity is shadow unless
-        # darker than the cable's typical pixel (a soft shadow beside a dark cable is as
-        # dark as its own darkest quarter)
+        # a colourless cable on a tinted table (its chromaticity is not the table's, but it
+        # is no more saturated): a darker pixel near the table's chromaticity is shadow from
+        # the cable's median share up (a dark cable's soft shadow may be darker than
+        # shadow_depth times the mask's darkest quarter)
         lightest = min(lightest, float(np.median(share[distinct])))
         reach = max(reach, _SHADOW_GAP * float(np.median(offset[distinct])))
     return offset, lightest, reach, False
