@@ -98,6 +98,35 @@ def test_the_shipped_weights_load_and_round_trip():
     np.testing.assert_array_equal(again.logits(features), classifier.logits(features))
 
 
+def test_labels_are_the_float64_log_odds_sign_even_next_to_zero(frame):
+    image, truth = frame
+    classifier = outline.outline_classifier()
+    _, features = outline.outline_features(grown(truth, 2), image, cable_width(truth))
+    assert np.array_equal(classifier.labels(features), classifier.logits(features) > 0)
+    # rows on the segment between a cable row and a background row, bisected to where the
+    # float64 log-odds change sign: there float32 cannot tell, and the labels still agree
+    logits = classifier.logits(features)
+    low, high = features[np.argmin(logits)].astype(np.float64), \
+        features[np.argmax(logits)].astype(np.float64)
+    a, b = 0.0, 1.0
+    for _ in range(60):
+        middle = (a + b) / 2
+        if classifier.logits((low + middle * (high - low))[None])[0] > 0:
+            b = middle
+        else:
+            a = middle
+    rows = (low + np.linspace(a - 1e-6, b + 1e-6, 401)[:, None] * (high - low)).astype(
+        np.float32)
+    exact = classifier.logits(rows)
+    assert (np.abs(exact) < classifier.margin(rows)).any() and (exact > 0).any() \
+        and (exact <= 0).any()
+    assert np.array_equal(classifier.labels(rows), exact > 0)
+    # the bound is a bound: the float32 log-odds are that close to the float64 ones
+    units = np.tanh(features @ classifier._folded32 + classifier._folded_bias32)
+    fast = units @ classifier._output32 + np.float32(classifier.output_bias)
+    assert np.abs(fast - logits).max() < classifier.margin(features) / 2 < 0.05
+
+
 @pytest.mark.parametrize("broken", [{"format": "other"}, {"reach": 5}, {"steps": [0.0]},
                                     {"mean": [0.0, 1.0]}])
 def test_weights_for_other_features_are_refused(broken):

@@ -892,10 +892,10 @@ def _shadow_rule(pixels, behind, share, lit, settings):
     pixel, the greatest offset, and whether the cable has a colour of its own."""
     pixel_chroma, behind_chroma = _chroma(pixels), _chroma(behind)
     offset = np.linalg.norm(pixel_chroma - behind_chroma, axis=-1)
+    distinct = lit & (offset > _COLOURED * settings.shadow_chroma)
     # of a colour of its own: far from the background's chromaticity and more saturated (a
     # black cable on a tinted table is far from its chromaticity too)
-    coloured = lit & (offset > _COLOURED * settings.shadow_chroma) \
-        & (_saturation(pixel_chroma) > _saturation(behind_chroma))
+    coloured = distinct & (_saturation(pixel_chroma) > _saturation(behind_chroma))
     if np.count_nonzero(coloured) >= _COLOURED_SHARE * len(share):
         # what is nearer the background's chromaticity is not cable, however dark (a hard
         # shadow is darker than a bright cable)
@@ -904,7 +904,6 @@ def _shadow_rule(pixels, behind, share, lit, settings):
     # the cable is darker than its shadow
     lightest = settings.shadow_depth * np.percentile(share, 25)
     reach = settings.shadow_chroma
-    distinct = lit & (offset > _COLOURED * settings.shadow_chroma)
     if np.count_nonzero(distinct) >= _COLOURED_SHARE * len(share):
         # a colourless cable on a tinted table (its chromaticity is not the table's, but it
         # is no more saturated): a darker pixel near the table's chromaticity is shadow from
