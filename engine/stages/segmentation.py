@@ -108,6 +108,11 @@ class SegmentationSettings:
         Connected pieces smaller than ``speck_area * width**2`` pixels are removed.
     fill_highlights : bool
         Fill the desaturated specular streak along a glossy cable.
+    highlight_probability : float
+        A pixel of the streak must be at least this likely to the colour model (the default:
+        any likelihood at all, 2 in 255): a colour the model rules out, because the background
+        is full of it, is not the cable's highlight (the table seen in a narrow gap between
+        two strands that nearly touch is bright and closed over too). 0 turns this off.
     shade_value, shade_saturation : float
         Edge correction on the shadow side: a mask pixel on the edge leaves it when it is darker
         than ``shade_value`` times the cable's median value and less saturated than
@@ -225,6 +230,7 @@ class SegmentationSettings:
 
     speck_area: float = setting(3.0, low=0, unit="widths²")
     fill_highlights: bool = True
+    highlight_probability: float = setting(0.004, low=0, high=1)
     shade_value: float = setting(0.5, low=0, high=1)
     shade_saturation: float = setting(0.95, low=0, high=1)
     junction_radius: float = setting(1.5, above=0, unit="widths")
@@ -583,12 +589,18 @@ def _remove_specks(mask, half, min_area):
     return mask & (kept > 0)
 
 
-def _fill_highlights(mask, hsv, width):
-    """Bridge the bright, desaturated streak a glossy cable shows along its middle."""
+def _fill_highlights(mask, hsv, width, likely=None):
+    """Bridge the bright, desaturated streak a glossy cable shows along its middle: what a
+    closing adds that is as bright as the mask's brighter pixels (and, where ``likely`` is
+    given, a colour the model does not rule out: the table seen between two strands that
+    nearly touch is closed over and bright too)."""
     span = max(int(round(width * 0.6)), 1) | 1
     closed = cv2.morphologyEx(mask.view(np.uint8), cv2.MORPH_CLOSE,
                               cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (span, span))) > 0
-    return mask | (closed & (hsv[..., 2] >= _channel_percentile(hsv, 2, mask, 60)))
+    closed &= hsv[..., 2] >= _channel_percentile(hsv, 2, mask, 60)
+    if likely is not None:
+        closed &= likely
+    return mask | closed
 
 
 def colour_seed(image_rgb, colour, settings=SegmentationSettings()):
@@ -735,7 +747,8 @@ def calibrated_level(model, images_rgb, seeds, settings=SegmentationSettings()):
 
 
 def _model_mask(image_rgb, model, settings, in_range=None, least_width=0.0):
-    """Pixels the model calls cable: ``(sure, sure or likely)``. Sure at ``probability``;
+    """Pixels the model calls cable: ``(sure, sure or likely, probability)``, the last the
+    model's probability of each pixel (0 to 255, :func:`_probability`). Sure at ``probability``;
     likely within half a cable width of a sure one, at ``probability_near`` or inside the
     colour range (a cable's shade side, or a strand darkened where another passes over it,
     is a colour the background has too, but not right beside the cable). The range counts
@@ -746,7 +759,7 @@ def _model_mask(image_rgb, model, settings, in_range=None, least_width=0.0):
     level = settings.probability if model.level is None else model.level
     sure = probability >= 255.0 * level
     if not settings.probability_near < settings.probability:
-        return sure, sure
+        return sure, sure, probability
     # lowered with the level
     near_level = settings.probability_near * level / settings.probability
     small = cv2.resize(sure.view(np.uint8), (sure.shape[1] // 2, sure.shape[0] // 2),
@@ -758,7 +771,7 @@ def _model_mask(image_rgb, model, settings, in_range=None, least_width=0.0):
     # the rest happens on the box of the sure pixels grown by the reaches
     box = _cable_box(sure, int(math.ceil(max(near_reach, shade_reach) + _AROUND)) + 1)
     if box is None:
-        return sure, sure
+        return sure, sure, probability
     distance = cv2.distanceTransform(np.ascontiguousarray(~sure[box]).view(np.uint8),
                                      cv2.DIST_L2, cv2.DIST_MASK_5)
     likely = probability[box] >= 255.0 * near_level
@@ -770,7 +783,7 @@ def _model_mask(image_rgb, model, settings, in_range=None, least_width=0.0):
         likely |= _shade_side(image_rgb[box], sure[box], distance, shade_reach, settings)
     mask = sure.copy()
     mask[box] |= likely
-    return sure, mask
+    return sure, mask, probability
 
 
 def _shade_side(image_rgb, sure, distance, reach, settings):
@@ -1048,9 +1061,10 @@ def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
     if settings.model and model is None:
         model = learn_colour_model([image_rgb], colour, settings)
     if settings.model and model is not None:
-        _, raw = _model_mask(image_rgb, model, settings, colour.select(hsv), least_width)
+        _, raw, probability = _model_mask(image_rgb, model, settings, colour.select(hsv),
+                                          least_width)
     else:
-        raw = colour.select(hsv)
+        raw, probability = colour.select(hsv), None
     raw = opened(raw)
     half, width = _rough_width(raw, least_width)
     if settings.shadow_chroma > 0 and width > 0:
@@ -1072,7 +1086,9 @@ def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
         return mask, mask, 0.0
     cable, cable_hsv = mask[box], hsv[box]
     if settings.fill_highlights:
-        cable = _fill_highlights(cable, cable_hsv, width)
+        likely = None if probability is None \
+            else probability[box] >= 255.0 * settings.highlight_probability
+        cable = _fill_highlights(cable, cable_hsv, width, likely)
     plain = _correct_edges(cable, cable_hsv, settings) if colour.has_hue else cable
     refined = plain
     if settings.edge_reach > 0:
