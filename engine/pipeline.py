@@ -984,8 +984,32 @@ def _carve_and_resolve(views, up, clock, settings, cancel, warnings):
     topology = resolve_topology(graph, views, radius=grid.radius, up=up,
                                 settings=settings.topology, progress=stage, cancel=cancel,
                                 workers=settings.workers)
+    topology = _fittable(topology, settings.fit.spacing, grid.radius)
     clock.done()
     return grid, topology, list(warnings) + list(topology.warnings), thickness
+
+
+def _fittable(topology, spacing, radius):
+    """``topology`` without the paths no longer than one vertex spacing of the fit (``spacing``
+    radii): a speck the topology keeps when no path is as long as its ``min_path_length``
+    (masks that hold only specks of the cable); a ReconstructionError when none is longer."""
+    lengths = [_polyline_length(path.points, False) for path in topology.paths]
+    keep = [k for k, length in enumerate(lengths) if length > spacing * radius]
+    if not keep:
+        raise ReconstructionError(
+            f"no path could be formed: the longest piece of cable in the carved volume is "
+            f"{max(lengths, default=0.0) / radius:.1f} r long (do the masks hold only specks of "
+            f"the cable? check its colour)")
+    if len(keep) == len(lengths):
+        return topology
+    number = {old: new for new, old in enumerate(keep)}
+    crossings = tuple(replace(c, over=(number[c.over[0]], c.over[1]),
+                              under=(number[c.under[0]], c.under[1]))
+                      for c in topology.crossings if c.over[0] in number and c.under[0] in number)
+    dropped = tuple(f"dropped a piece of cable {lengths[k] / radius:.1f} r long (too short to fit)"
+                    for k in range(len(lengths)) if k not in number)
+    return replace(topology, paths=tuple(topology.paths[k] for k in keep), crossings=crossings,
+                   warnings=tuple(topology.warnings) + dropped)
 
 
 def _finish(fits, crossings, state, clock):

@@ -345,3 +345,27 @@ def test_the_sample_as_make_demo_runs_it_with_estimated_cameras():
     assert metrics.crossings_right == metrics.crossings_total == 3 and metrics.one_path
     assert metrics.radius_error <= 0.05
     assert metrics.completeness >= 0.98
+
+
+def test_a_piece_too_short_to_fit_is_dropped_and_none_longer_fails_with_a_reason():
+    """The topology keeps every path when none is as long as its ``min_path_length`` (masks
+    that hold only specks of the cable); the fit cannot take one shorter than a vertex: it
+    is dropped (its crossings' numbers follow), and with no longer one the run fails with a
+    reason instead of the fit's ValueError."""
+    from engine.stages.topology.model import Topology, TopologyCrossing, TopologyPath
+
+    def straight(length, y):
+        return TopologyPath(np.column_stack([np.linspace(0, length, 9), np.full(9, y),
+                                             np.zeros(9)]), False)
+
+    crossing = TopologyCrossing(np.zeros(3), over=(2, 3), under=(2, 6), confidence=0.9)
+    topology = Topology(paths=(straight(6.0, 0.0), straight(0.5, 5.0), straight(8.0, 9.0)),
+                        crossings=(crossing,))
+    fittable = pipeline._fittable(topology, 1.0, 1.0)
+    assert [len(p.points) for p in fittable.paths] == [9, 9]
+    assert fittable.paths[1] is topology.paths[2]
+    assert fittable.crossings[0].over == (1, 3) and fittable.crossings[0].under == (1, 6)
+    assert any("0.5 r long" in w for w in fittable.warnings)
+    assert pipeline._fittable(fittable, 1.0, 1.0) is fittable
+    with pytest.raises(ReconstructionError, match="longest piece of cable .* 0.5 r"):
+        pipeline._fittable(Topology(paths=(straight(0.5, 0.0),), crossings=()), 1.0, 1.0)
