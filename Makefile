@@ -45,15 +45,20 @@ setup-all: setup .venv-5.2/.requirements-installed .venv-4.5/.requirements-insta
 demo: setup
 	$(PY) tools/demo.py
 
+# The suite runs on every core (pytest-xdist): each test file on one worker, so a file's
+# module fixtures are made once; PYTEST_WORKERS=0 runs it in this process alone.
+PYTEST_WORKERS ?= auto
+PYTEST := -m pytest -n $(PYTEST_WORKERS) --dist loadfile
+
 test: setup
-	$(PY) -m pytest
+	$(PY) $(PYTEST)
 
 # The suite in the other Blender lines (the installer test through each one's own installer).
 test-4.5: .venv-4.5/.requirements-installed
-	.venv-4.5/bin/python -m pytest
+	.venv-4.5/bin/python $(PYTEST)
 
 test-5.2: .venv-5.2/.requirements-installed
-	.venv-5.2/bin/python -m pytest
+	.venv-5.2/bin/python $(PYTEST)
 
 # Every line, the newest last: its run also checks that the sample reconstructs to the same
 # points in the others (tests/test_blender_lines.py).

@@ -264,8 +264,46 @@ def _snapshot(folder):
             for path in folder.rglob("*") if path.is_file()}
 
 
-def _run_fault(name, prepare, expected, clean, work):
-    folder = work / "capture"
+#: A run silent this long (seconds) is a hang: it is killed.
+_HANG = 600.0
+
+
+@dataclasses.dataclass
+class _Run:
+    """One fault's command, running."""
+
+    name: str
+    expected: tuple
+    folder: Path
+    before: dict
+    process: subprocess.Popen
+    waiting: list  # the progress messages still awaited before Ctrl-C
+    interrupted: bool
+    started: float = dataclasses.field(default_factory=time.perf_counter)
+    stderr: bytes = b""
+    seen: int = 0
+    deadline: float = dataclasses.field(default_factory=lambda: time.monotonic() + _HANG)
+
+    def read(self):
+        """Read what the command wrote on stderr; False at its end. Presses Ctrl-C once
+        every awaited message showed, in order."""
+        chunk = os.read(self.process.stderr.fileno(), 1 << 16)
+        if not chunk:
+            return False
+        self.stderr += chunk
+        self.deadline = time.monotonic() + _HANG
+        while self.waiting and (found := self.stderr.find(self.waiting[0], self.seen)) >= 0:
+            self.seen = found + len(self.waiting.pop(0))  # the next is looked for after it
+            if not self.waiting:
+                self.process.send_signal(signal.SIGINT)
+        return True
+
+
+def _start_fault(number, fault, clean, work):
+    """Fault ``number`` prepared in a fresh copy of the ``clean`` capture and its command
+    started."""
+    name, prepare, expected = fault
+    folder = work / f"capture{number}"
     shutil.copytree(clean, folder)
     images, extra = prepare(folder)
     size_limit = _FILE_SIZE_LIMIT in extra
@@ -277,34 +315,9 @@ def _run_fault(name, prepare, expected, clean, work):
         (folder / "out").mkdir(exist_ok=True)
         extra += ["-o", str(folder / "out" / "result.json")]
     before = _snapshot(folder)
-    started = time.perf_counter()
     command = [sys.executable, "-m", "engine"] + ([] if interrupt else ["-q"]) + [
         "reconstruct", str(images), *extra]
-    returncode, stderr = _run_command(command, interrupt, size_limit)
-    seconds = time.perf_counter() - started
-    after = _snapshot(folder)
-    changed = sorted(str(path.relative_to(folder)) for path in before
-                     if after.get(path) != before[path])
-    added = sorted(str(path.relative_to(folder)) for path in after if path not in before)
-    lines = [line for line in re.split(r"[\r\n]", stderr) if line.strip()
-             and not line.startswith("[")]  # (the progress bar's lines)
-    message = next((line for line in (reversed(lines) if interrupt else lines)
-                    if not line.startswith("warning:")), "")
-    traceback = "Traceback" in stderr or returncode == 4
-    untouched = not changed and (returncode == 0 or not added)
-    shutil.rmtree(folder, ignore_errors=True)
-    return {"fault": name, "exit": returncode,
-            "expected": "/".join(map(str, expected)),
-            "ok": "yes" if returncode in expected and not traceback and untouched else "NO",
-            "traceback": "yes" if traceback else "no",
-            "nothing_changed": "yes" if untouched else f"no: {', '.join(changed + added)[:60]}",
-            "message": message.replace(str(work), "…")[:110].replace("|", "/"),
-            "seconds": round(seconds, 1)}
 
-
-def _run_command(command, interrupt, size_limit):
-    """Run ``command`` (pressing Ctrl-C as ``interrupt`` says, under a file size limit if
-    asked); its exit code and stderr."""
     def limit():
         # a run started in the background inherits an ignored SIGINT, and Python then never
         # turns Ctrl-C into KeyboardInterrupt: give it the default back
@@ -312,42 +325,83 @@ def _run_command(command, interrupt, size_limit):
         if size_limit:
             resource.setrlimit(resource.RLIMIT_FSIZE, (1024, 1024))
 
+    # (the runs are started from this thread alone, so preexec_fn is safe)
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                cwd=Path(__file__).resolve().parents[2], preexec_fn=limit)
-    stderr, waiting, seen = b"", [m.encode() for m in interrupt.after] if interrupt else [], 0
-    deadline = time.monotonic() + 600
-    while True:
-        ready, _, _ = select.select([process.stderr], [], [], max(deadline - time.monotonic(), 0))
-        if not ready:  # silent past the deadline: a hang
-            process.kill()
-            break
-        chunk = os.read(process.stderr.fileno(), 1 << 16)
-        if not chunk:
-            break
-        stderr += chunk
-        while waiting and (found := stderr.find(waiting[0], seen)) >= 0:
-            seen = found + len(waiting.pop(0))  # the next message is looked for after it
-            if not waiting:
-                process.send_signal(signal.SIGINT)
-    process.stderr.close()
-    return process.wait(), stderr.decode(errors="replace")
+    return _Run(name, expected, folder, before, process,
+                [m.encode() for m in interrupt.after] if interrupt else [], interrupt is not None)
 
 
-def bench_faults(*, progress=None):
-    """Run every fault of :data:`FAULTS`; one row each.
+def _finished(run, work):
+    """The row of a run whose command ended (its copy of the capture removed)."""
+    run.process.stderr.close()
+    returncode = run.process.wait()
+    seconds = time.perf_counter() - run.started
+    stderr = run.stderr.decode(errors="replace")
+    folder = run.folder
+    after = _snapshot(folder)
+    changed = sorted(str(path.relative_to(folder)) for path in run.before
+                     if after.get(path) != run.before[path])
+    added = sorted(str(path.relative_to(folder)) for path in after if path not in run.before)
+    lines = [line for line in re.split(r"[\r\n]", stderr) if line.strip()
+             and not line.startswith("[")]  # (the progress bar's lines)
+    message = next((line for line in (reversed(lines) if run.interrupted else lines)
+                    if not line.startswith("warning:")), "")
+    traceback = "Traceback" in stderr or returncode == 4
+    untouched = not changed and (returncode == 0 or not added)
+    shutil.rmtree(folder, ignore_errors=True)
+    message = message.replace(str(folder), "…/capture").replace(str(work), "…")
+    return {"fault": run.name, "exit": returncode,
+            "expected": "/".join(map(str, run.expected)),
+            "ok": "yes" if returncode in run.expected and not traceback and untouched else "NO",
+            "traceback": "yes" if traceback else "no",
+            "nothing_changed": "yes" if untouched else f"no: {', '.join(changed + added)[:60]}",
+            "message": message[:110].replace("|", "/"),
+            "seconds": round(seconds, 1)}
+
+
+def bench_faults(*, workers=2, progress=None):
+    """Run every fault of :data:`FAULTS`; one row each, in their order.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Faults run at once (each command in its own process, on its own copy of the capture).
+    progress : callable, optional
+        ``progress(fraction, message)``.
 
     Returns
     -------
     list of dict
     """
-    rows = []
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, not {workers}")
+    rows = [None] * len(FAULTS)
     with tempfile.TemporaryDirectory(prefix="bench_faults_") as work:
         work = Path(work)
         clean = _capture(work / "clean")
-        for number, (name, prepare, expected) in enumerate(FAULTS):
-            if progress is not None:
-                progress(number / len(FAULTS), name)
-            rows.append(_run_fault(name, prepare, expected, clean, work))
+        waiting, running, done = list(enumerate(FAULTS)), {}, 0
+        while waiting or running:
+            while waiting and len(running) < workers:
+                number, fault = waiting.pop(0)
+                if progress is not None:
+                    progress(done / len(FAULTS), fault[0])
+                run = _start_fault(number, fault, clean, work)
+                running[run.process.stderr.fileno()] = (number, run)
+            timeout = max(min(run.deadline for _, run in running.values()) - time.monotonic(),
+                          0.0)
+            ready, _, _ = select.select(list(running), [], [], timeout)
+            for descriptor, (number, run) in list(running.items()):
+                if descriptor in ready:
+                    ended = not run.read()
+                else:  # silent past its deadline: a hang
+                    ended = time.monotonic() >= run.deadline
+                    if ended:
+                        run.process.kill()
+                if ended:
+                    del running[descriptor]
+                    rows[number] = _finished(run, work)
+                    done += 1
     if progress is not None:
         progress(1.0, "done")
     return rows
