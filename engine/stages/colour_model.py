@@ -656,11 +656,17 @@ class ColourModel:
         The probability (0 to 1) from which a pixel is the cable, when the model's own
         samples chose one (:func:`engine.stages.segmentation.calibrated_level`); None: the
         settings' ``probability``.
+    banded : bool
+        The cable is a row of bands of this colour with gaps of the table's colours between
+        them (:func:`engine.stages.stripes.banded`): each frame's mask is bridged along the
+        cable. Set by :func:`engine.stages.segmentation.sequence_colour` and the other
+        learners, from the masks the model gives on the frames it was learnt from.
     """
 
     def __init__(self, histograms, prior, smoothing=1.0):
         self.histograms, self.prior, self.smoothing = histograms, prior, smoothing
         self.level = None
+        self.banded = False
         self.bins = histograms[0][0].shape[0]
         self.luts, self._mats = [], []
         for cable, background in histograms:

@@ -9,6 +9,8 @@ gaps between its first colour's bands, joins the seed: :mod:`engine.stages.strip
 learnt again from the masks it gives on those frames (:func:`_relearnt`: a found colour is
 often a band of the cable only). Each frame's pixels are classified by that model: sure pixels,
 and likely ones right beside them (a shade side, a strand darkened under another).
+A cable striped in its colour and the table's is found as a row of dashes: each frame's
+dashes are bridged along the cable first (:func:`engine.stages.stripes.bridged`).
 Specks are removed, the side of the cable its colours missed is put back by the cable's shape
 (:mod:`engine.stages.missing_side`), pieces shaped like objects rather than cable are removed,
 the desaturated specular streak along a glossy cable is filled back in, the outline is refined
@@ -42,7 +44,7 @@ from .pixels import cable_box as _cable_box
 from .pixels import chroma as _chroma
 from .pixels import sample_at
 from .skeleton_2d import fill_small_holes, skeleton_clusters, thin
-from .stripes import with_second_colour
+from .stripes import banded, bridged, with_second_colour
 from .union_find import DisjointSets
 
 #: :func:`_shade_side` compares the shade side with the pixels up to this many pixels beyond it.
@@ -87,6 +89,10 @@ _RELEARN_RIM = 3.0
 #: (``_THIN_SHARE``) in thin pieces (a stripe's bands do not).
 _HUE_SHARE = 0.15
 _THIN_SHARE = 0.5
+
+#: :func:`_with_bands`: a model learnt again whose masks cover this share of the first
+#: model's bridged masks found a striped cable's second colour.
+_WHOLE = 0.7
 
 #: :func:`_joined`: the seam between two cables' masks is filled up to this many cable widths.
 _SEAM = 0.15
@@ -187,7 +193,9 @@ class SegmentationSettings:
     stripe_reach : float
         The gaps between a striped cable's bands, up to twice this many cable widths long,
         are looked at for its second colour, which the model then learns as the cable's
-        (:mod:`engine.stages.stripes`); 0 turns this off.
+        (:mod:`engine.stages.stripes`); where none is (the second colour is the table's)
+        and the model's masks are rows of dashes (:func:`engine.stages.stripes.banded`),
+        each frame's mask is closed by a disc of this many widths. 0 turns both off.
     all_cables : bool
         Find every cable of its own colour, not only the most cable-like thing (automatic
         colour only): each cable is segmented with its own colour model and the masks are
@@ -353,7 +361,8 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
         colour, candidate = find_cable(frames)
         seeds = [colour_seed(frame, candidate, settings) for frame in frames]
         colour, model = _learnt(frames, seeds, colour, settings)
-        return colour, _relearnt(frames, seeds, colour, model, settings)
+        relearnt = _relearnt(frames, seeds, colour, model, settings)
+        return colour, _with_bands(frames, colour, model, settings, relearnt)
     # split by hue first, then each cable's shade side is found with its own colour
     bare = replace(settings, seed_shade_reach=0.0)
     parts = [(colour, part) for colour, candidate in find_cables(frames)
@@ -364,7 +373,9 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
                             if seed.any() else seed, objects, width)
                            for frame, (seed, objects, width) in zip(frames, part)])
                  for colour, part in parts]
-    cables = [_learnt(frames, part, colour, settings) for colour, part in parts]
+    cables = [(colour, _with_bands(frames, colour, model, settings))
+              for colour, model in (_learnt(frames, part, colour, settings)
+                                    for colour, part in parts)]
     return cables[0][0], SeveralCables(cables)
 
 
@@ -399,7 +410,8 @@ def colour_from_masks(frames, masks, settings=SegmentationSettings()):
     if not any(mask.any() for mask in masks):
         raise ValueError("the masks hold no cable pixel")
     seeds = [(mask, np.zeros_like(mask), cable_width(mask)) for mask in masks]
-    return _learnt(frames, seeds, None, settings)
+    colour, model = _learnt(frames, seeds, None, settings)
+    return colour, _with_bands(frames, colour, model, settings)
 
 
 def _learnt(frames, seeds, colour, settings):
@@ -430,7 +442,8 @@ def _relearnt(frames, seeds, colour, model, settings):
     learning left a seed's width between the two (the seed narrower than the cable), where a
     shadow beside the cable lies; left again, the shadow is learnt as neither and joins the
     cable (neutral seed 11: IoU 0.949 learnt once; learnt again with a gap of the masks' cable
-    width 0.844, with this one 0.978). A frame whose mask is empty keeps its seed."""
+    width 0.844, with this one 0.978). A frame whose mask is empty keeps its seed. A model
+    whose masks are rows of dashes may keep its first learning (:func:`_with_bands`)."""
     if not settings.relearn or model is None:
         return model
     again = []
@@ -673,8 +686,9 @@ def learn_colour_model(images_rgb, colour, settings=SegmentationSettings()):
         as it is).
     """
     images_rgb = list(images_rgb)
-    return _model_of(images_rgb, [colour_seed(image, colour, settings) for image in images_rgb],
-                     settings)
+    model = _model_of(images_rgb, [colour_seed(image, colour, settings) for image in images_rgb],
+                      settings)
+    return _with_bands(images_rgb, colour, model, settings)
 
 
 def _model_of(images_rgb, seeds, settings):
@@ -691,6 +705,44 @@ def _model_of(images_rgb, seeds, settings):
         return None
     model.level = calibrated_level(model, images_rgb, seeds, settings)
     return model
+
+
+def _with_bands(images_rgb, colour, model, settings, relearnt=None):
+    """The model to segment with: ``relearnt`` (``model`` learnt again, :func:`_relearnt`; None:
+    ``model`` itself), or ``model`` marked
+    :attr:`~engine.stages.colour_model.ColourModel.banded` when the masks it gives on the
+    frames it was learnt from are rows of dashes under a speck's area
+    (:func:`engine.stages.stripes.banded`: a cable striped in its colour and another) and
+    learning again did not find the other colour.
+
+    Learning again from the first model's masks finds a striped cable's second colour where
+    it is not the table's (its dashes touch here and there, and those pieces are learnt
+    from): the masks of the model learnt again then cover as much as the first model's
+    bridged ones (:data:`_WHOLE` of their area), and are nearer the cable (patterned tuning
+    seeds 44 and 51, yellow and blue on dark tiles, magenta and green on wood: 0.90 IoU
+    learnt again, 0.84 and 0.85 bridged). Where it is the table's, the model learnt again
+    covers less, a thin line of the cable or its shadow (seed 62: 0.03 IoU), and the first
+    one, bridged, is kept (0.74). A model learnt from bridged masks would learn the table's
+    colours in their gaps as the cable's (seeds 132 and 62: 0.51 and 0.55)."""
+    relearnt = model if relearnt is None else relearnt
+    if not isinstance(model, ColourModel) or settings.stripe_reach <= 0:
+        return relearnt
+    dashes = [opened(_model_mask(image, model, settings)[1]) for image in images_rgb]
+    widths = [_rough_width(mask, 0.0)[1] for mask in dashes]
+    if not banded(dashes, widths, settings.stripe_reach, settings.speck_area):
+        return relearnt
+    model.banded = True
+    if relearnt is not model and (_masks_area(images_rgb, colour, relearnt, settings)
+                                  >= _WHOLE * _masks_area(images_rgb, colour, model, settings)):
+        model.banded = False
+        return relearnt
+    return model
+
+
+def _masks_area(images_rgb, colour, model, settings):
+    """How many pixels the model's masks of the frames hold, together."""
+    return sum(np.count_nonzero(_cable_masks(image, colour, settings, model)[0])
+               for image in images_rgb)
 
 
 def _probability(model, image_rgb):
@@ -1067,6 +1119,9 @@ def _cable_masks(image_rgb, colour, settings, model=None, least_width=0.0):
         raw, probability = colour.select(hsv), None
     raw = opened(raw)
     half, width = _rough_width(raw, least_width)
+    if model is not None and model.banded and width > 0:  # dashes, each under a speck
+        raw = bridged(raw, width, settings.stripe_reach)
+        half, width = _rough_width(raw, least_width)
     if settings.shadow_chroma > 0 and width > 0:
         without = _without_shadow(raw, image_rgb, width, settings)
         if without is not raw:  # the shadow made the cable look wider

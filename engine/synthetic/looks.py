@@ -40,8 +40,10 @@ LOOK_FAMILIES = ("saturated", "pale", "neutral", "patterned", "same_hue", "hard_
 SEVERAL_CABLES = ("two_cables",)
 TABLE_KINDS = ("wood", "voronoi", "weave", "paper", "tiles", "plain")
 
-#: Seeds the segmentation may be tuned on, and seeds it is only ever reported on.
-TUNING_SEEDS = tuple(range(0, 100))
+#: Seeds the segmentation may be tuned on, and seeds it is only ever reported on (the benches
+#: take the first few of each; a look that fails once in a hundred scenes is searched for
+#: among the tuning seeds past them).
+TUNING_SEEDS = tuple(range(0, 1000))
 HELD_OUT_SEEDS = tuple(range(1000, 1100))
 
 
