@@ -88,10 +88,14 @@ def test_a_profile_charges_each_engine_function_its_library_calls_but_not_its_ca
     (centres, elapsed), times = profiled(work)
     assert len(centres) == 1
     assert all(label.startswith("engine.") for label in times)  # not numpy's nor OpenCV's
-    thin = times["engine.stages.skeleton_2d.thin"]
-    assert thin[1] == 5 and thin[0] > 0
-    # each caller is charged its own work only: together they are the run, not more
-    assert 0.8 * elapsed < sum(seconds for seconds, _ in times.values()) <= 1.05 * elapsed
+    assert times["engine.stages.skeleton_2d.thin"][1] == 5
+    # charged its library calls (OpenCV's and numpy's work), the most of any function here;
+    # thin's own few milliseconds are within the timer's noise on a loaded machine
+    assert times["engine.stages.skeleton_2d.skeleton_clusters"][0] > 0
+    # each caller is charged its own work only: together they are the run, not more (a caller
+    # charged its callees too would count the nested calls two or three times over; the bound
+    # leaves room for the profiler's timing on a loaded machine: 1.05 failed beside 4 processes)
+    assert 0.8 * elapsed < sum(seconds for seconds, _ in times.values()) <= 1.25 * elapsed
     rows = top_functions([("true", times), ("true", times)], count=3)
     functions = [row for row in rows if row["function"] != "(all of the stage)"]
     assert len(functions) == 3 and functions[0]["scenes"] == "2/2"
