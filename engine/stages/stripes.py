@@ -26,7 +26,7 @@ dashes, each smaller than a speck, so removed: nothing was left of the cable. Th
 still tells: most of its pixels (:data:`BANDED_SHARE`) lie in pieces smaller than a speck that
 the same closing joins into chains of several specks' area (measured on the seeds of 132
 tuning scenes: 0.90 and 0.98 for two such cables, at most 0.1 for a plain cable, whose seed
-is a few long pieces, and 0.55 for a striped one whose second colour is taken). Such masks
+is a few long pieces, and 0.46 and 0.55 for two other striped ones). Such masks
 are *banded* (:func:`banded`, asked of the colour model's masks on the frames it learns
 from: :func:`engine.stages.segmentation._with_bands`), and each frame's mask is then its
 dashes closed along the cable (:func:`bridged`) before specks are removed.
