@@ -360,27 +360,12 @@ def _finished(run, work):
             "seconds": round(seconds, 1)}
 
 
-def bench_faults(*, workers=2, progress=None):
-    """Run every fault of :data:`FAULTS`; one row each, in their order.
-
-    Parameters
-    ----------
-    workers : int, optional
-        Faults run at once (each command in its own process, on its own copy of the capture).
-    progress : callable, optional
-        ``progress(fraction, message)``.
-
-    Returns
-    -------
-    list of dict
-    """
-    if workers < 1:
-        raise ValueError(f"workers must be at least 1, not {workers}")
+def _run_faults(clean, work, workers, progress):
+    """The rows of every fault, ``workers`` at a time, each command watched for its messages
+    and for silence (:data:`_HANG`); no command is left running if one cannot start."""
     rows = [None] * len(FAULTS)
-    with tempfile.TemporaryDirectory(prefix="bench_faults_") as work:
-        work = Path(work)
-        clean = _capture(work / "clean")
-        waiting, running, done = list(enumerate(FAULTS)), {}, 0
+    waiting, running, done = list(enumerate(FAULTS)), {}, 0
+    try:
         while waiting or running:
             while waiting and len(running) < workers:
                 number, fault = waiting.pop(0)
@@ -402,6 +387,33 @@ def bench_faults(*, workers=2, progress=None):
                     del running[descriptor]
                     rows[number] = _finished(run, work)
                     done += 1
+    finally:  # a fault that could not start (or Ctrl-C): no command left behind
+        for _, run in running.values():
+            run.process.kill()
+            run.process.wait()
+            run.process.stderr.close()
+    return rows
+
+
+def bench_faults(*, workers=2, progress=None):
+    """Run every fault of :data:`FAULTS`; one row each, in their order.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Faults run at once (each command in its own process, on its own copy of the capture).
+    progress : callable, optional
+        ``progress(fraction, message)``.
+
+    Returns
+    -------
+    list of dict
+    """
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, not {workers}")
+    with tempfile.TemporaryDirectory(prefix="bench_faults_") as work:
+        work = Path(work)
+        rows = _run_faults(_capture(work / "clean"), work, workers, progress)
     if progress is not None:
         progress(1.0, "done")
     return rows
