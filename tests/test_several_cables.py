@@ -141,6 +141,8 @@ def test_all_cables_learns_a_model_per_cable_and_masks_both(pair_scene):
 
 @pytest.mark.parametrize("family, seed, count", [
     ("two_cables", 11, 2),  # the best candidate holds one cable's colours only
+    ("two_cables", 48, 2),  # the dark ring both cast on a tinted table is no third (was 4)
+    ("two_cables", 44, 2),  # nor on a green weave (was 3)
     ("saturated", 1, 1),
     ("same_hue", 1, 1),  # a table of the cable's hue is not another cable
     ("pale", 0, 1),  # nor is a colourless part of the table
