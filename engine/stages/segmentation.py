@@ -233,7 +233,8 @@ class SegmentationSettings:
         The automatically found cable's colour model is learnt a second time, from the masks
         the first one gives on the frames it was learnt from: a found colour is often a band
         of the cable only (a glossy grey cable's highlight), and the first model takes the
-        rest of the cable for background. Not with ``all_cables``, nor with a colour given.
+        rest of the cable for background. With ``all_cables`` each cable's model is learnt
+        again from its own masks. Not with a colour given.
     """
 
     speck_area: float = setting(3.0, low=0, unit="widths²")
@@ -373,9 +374,14 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
                             if seed.any() else seed, objects, width)
                            for frame, (seed, objects, width) in zip(frames, part)])
                  for colour, part in parts]
-    cables = [(colour, _with_bands(frames, colour, model, settings))
-              for colour, model in (_learnt(frames, part, colour, settings)
-                                    for colour, part in parts)]
+    # each cable's model learnt again from its own masks, made as they are in a run
+    # (_several_masks: no missing side)
+    alone = replace(settings, side_reach=0.0)
+    cables = []
+    for colour, part in parts:
+        colour, model = _learnt(frames, part, colour, settings)
+        relearnt = _relearnt(frames, part, colour, model, alone)
+        cables.append((colour, _with_bands(frames, colour, model, settings, relearnt)))
     return cables[0][0], SeveralCables(cables)
 
 
