@@ -374,8 +374,8 @@ def sequence_colour(frames, colour=None, settings=SegmentationSettings()):
                             if seed.any() else seed, objects, width)
                            for frame, (seed, objects, width) in zip(frames, part)])
                  for colour, part in parts]
-    # each cable's model learnt again from its own masks, made as they are in a run
-    # (_several_masks: no missing side)
+    # each cable's model learnt again from its own masks, without the missing side as a run
+    # segments each cable (_several_masks), its specks removed cable by cable
     alone = replace(settings, side_reach=0.0)
     cables = []
     for colour, part in parts:
