@@ -166,15 +166,41 @@ def test_learning_on_a_scene_gives_a_classifier_that_decides_another(frame):
     assert iou(fixed, truth) > iou(wrong, truth) + 0.05
 
 
-@pytest.mark.parametrize("window", [5, 21])
-def test_window_sums_are_a_box_filter_s_at_every_pixel_and_edge(window):
+@pytest.mark.parametrize("windows", [5, 21, (5, 21), (21, 3, 9)])
+def test_window_sums_are_a_box_filter_s_at_every_pixel_and_edge(windows):
     """The integral image's window sums equal OpenCV's box filter (default border: reflected
-    without the edge pixel twice) at every pixel, the frame's edges and corners too."""
-    rng = np.random.default_rng(window)
+    without the edge pixel twice) at every pixel, the frame's edges and corners too; several
+    windows at once, each as if alone."""
+    rng = np.random.default_rng(np.sum(windows))
     image = rng.integers(0, 256, (60, 90, 3), dtype=np.uint8)
     where = rng.random((60, 90)) < 0.3
-    colours, counts = outline._window_sums(image, where, window, np.arange(60 * 90))
+    sums = outline._window_sums(image, where, windows, np.arange(60 * 90))
     four = cv2.merge([*cv2.split(cv2.bitwise_and(image, image, mask=where.view(np.uint8))),
                       where.view(np.uint8)])
-    box = cv2.boxFilter(four, cv2.CV_32F, (window, window), normalize=False).reshape(-1, 4)
-    assert np.array_equal(colours, box[:, :3]) and np.array_equal(counts, box[:, 3])
+    for window, (colours, counts) in (zip(windows, sums) if isinstance(windows, tuple)
+                                      else [(windows, sums)]):
+        box = cv2.boxFilter(four, cv2.CV_32F, (window, window), normalize=False).reshape(-1, 4)
+        assert np.array_equal(colours, box[:, :3]) and np.array_equal(counts, box[:, 3])
+
+
+def test_the_cable_s_colour_is_its_rim_s_on_the_pixel_s_side():
+    """A two-tone cable (a blue side and a dark red one along its length, 20 pixels wide on
+    grey): a pixel on the red side's outline has the red rim for the cable's colour, not the
+    mean of both sides (a window of two widths holds both; the classifier then took the red
+    side's dark rim for the table)."""
+    image = np.full((100, 160, 3), 150, np.uint8)
+    image[40:50] = (40, 60, 200)
+    image[50:60] = (120, 30, 40)
+    mask = np.zeros((100, 160), bool)
+    mask[40:60] = True
+    pixels, _ = outline.outline_features(mask, image, 20.0)
+    rows, cols = np.divmod(pixels, 160)
+    inside, outside = outline._distances(mask.view(np.uint8))
+    inner = inside > outline.REACH
+    red_side = np.flatnonzero((rows >= 55) & (cols > 30) & (cols < 130))
+    blue_side = np.flatnonzero((rows < 45) & (cols > 30) & (cols < 130))
+    cable, background = outline._colours_around(image, inside, outside, inner, pixels, 20.0,
+                                                41)
+    assert np.allclose(cable[red_side], (120, 30, 40))
+    assert np.allclose(cable[blue_side], (40, 60, 200))
+    assert np.allclose(background[red_side], 150)

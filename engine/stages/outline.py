@@ -20,7 +20,11 @@ dark band on a light table was taken for a shadow and half of it dropped).
 
 The cable's colour is the mean of the mask's pixels just inside that band, the background's
 the mean of the pixels up to half a cable width beyond it, both within a window of two cable
-widths: local, so uneven light, a two-tone cable or a printed table do not mislead them.
+widths: local, so uneven light or a printed table do not mislead them. Such a window holds
+the cable's rim on both of its edges, and a two-tone cable's are of its two colours: where
+the rim within a smaller window (:data:`RIM_WINDOW`), on the pixel's side, is of another
+chromaticity than the whole window's, it is the cable's colour (with the mean of both, the
+dark rim of a blue side beside a red one lay off the axis and was taken for the table).
 
 A small network (one hidden layer of :data:`HIDDEN` units, ``tanh``, logistic output) turns the
 features into the pixel's label; its weights (``outline_weights.json`` beside this module)
@@ -46,6 +50,12 @@ __all__ = ["OutlineClassifier", "REACH", "STEPS", "HIDDEN", "outline_features",
 REACH = 2
 #: Offsets (pixels) along the outline's outward normal where the colours are read.
 STEPS = np.arange(-3, 4, dtype=np.float32)
+#: Where the cable's rim near a pixel, within a square this many cable widths wide (odd, 3
+#: pixels at least: the rim on the pixel's side of the cable), is more than
+#: ``SECOND_COLOUR`` in chromaticity from the rim within the whole window, it is the cable's
+#: local colour (see :func:`_colours_around`).
+RIM_WINDOW = 0.6
+SECOND_COLOUR = 0.05
 #: Hidden units of the classifier.
 HIDDEN = 16
 #: The weights shipped with the engine.
@@ -167,29 +177,36 @@ def outline_classifier():
 
 def _window_sums(image, where, window, flat):
     """Sums of the colours of ``where``'s pixels (``image`` uint8) in a ``window``-wide square
-    around the pixels ``flat``, and how many they are (float32, exact: integer sums).
+    around the pixels ``flat``, and how many they are (float32, exact: integer sums); with a
+    tuple of windows, a ``(sums, counts)`` pair for each.
 
     As a box filter with OpenCV's default border (reflected, the edge pixel once) would give
     them, from the integral image of the frame so bordered: four look-ups a pixel, not a
-    filter over the whole box."""
+    filter over the whole box; one integral for every window."""
+    windows = (window,) if np.isscalar(window) else tuple(window)
     weight = where.view(np.uint8)
     # colours and count as the four channels of one image: one integral, not two
     four = cv2.merge([*cv2.split(cv2.bitwise_and(image, image, mask=weight)), weight])
-    half = window // 2
-    four = cv2.copyMakeBorder(four, half, half, half, half, cv2.BORDER_REFLECT_101)
+    border = max(windows) // 2
+    four = cv2.copyMakeBorder(four, border, border, border, border, cv2.BORDER_REFLECT_101)
     # integer sums; past what 32 bits hold (a 4K box), in float64, exact to 2**53
     exact = cv2.CV_32S if four.shape[0] * four.shape[1] * 255 < 2**31 else cv2.CV_64F
     integral = cv2.integral(four, sdepth=exact)
     stride = integral.shape[1]
-    # the window of frame pixel (row, col) covers rows row .. row + window - 1 and as many
-    # columns of the bordered frame: integral corners (row, col) to (row + window, col + window)
     rows, cols = np.divmod(flat, where.shape[1])
-    corner = rows * stride + cols
     corners = _pixels_of(integral)
-    total = (_taken(corners, corner + window * stride + window)
-             - _taken(corners, corner + window * stride) - _taken(corners, corner + window)
-             + _taken(corners, corner)).astype(np.float32)
-    return total[:, :3], total[:, 3]
+    found = []
+    for size in windows:
+        # the window of frame pixel (row, col) covers the bordered frame's rows and columns
+        # from (row, col) + border - size // 2, size of each: integral corners there and
+        # ``size`` further
+        shift = border - size // 2
+        corner = (rows + shift) * stride + cols + shift
+        total = (_taken(corners, corner + size * stride + size)
+                 - _taken(corners, corner + size * stride) - _taken(corners, corner + size)
+                 + _taken(corners, corner)).astype(np.float32)
+        found.append((total[:, :3], total[:, 3]))
+    return found[0] if np.isscalar(window) else found
 
 
 def _pixels_of(image):
@@ -282,18 +299,32 @@ def _distances(cable):
 
 def _colours_around(image, inside, outside, inner, flat, width, window):
     """The cable's and the background's local colours at the pixels ``flat``: the mean of the
-    mask's pixels right inside the band (a glossy cable's highlight farther in is not its
-    rim's colour; the whole inside where the rim has none in the window), and of the pixels up
-    to half a width beyond it. ``inner``: the mask's pixels past the band (``inside`` over
-    :data:`REACH`)."""
+    mask's pixels right inside the band within ``window`` (a glossy cable's highlight farther
+    in is not its rim's colour; the whole inside where the rim has none there), or within
+    :data:`RIM_WINDOW` cable widths where the rim there is of another chromaticity
+    (:data:`SECOND_COLOUR`: a two-tone cable's side, whose rim across the cable is the other
+    colour); and of the pixels up to half a width beyond the band, within ``window``.
+    ``inner``: the mask's pixels past the band (``inside`` over :data:`REACH`)."""
     rim = inner & (inside <= REACH + 2)
     beyond = (outside > REACH) & (outside <= REACH + width // 2)
-    rim_total, rim_count = _window_sums(image, rim, window, flat)
+    near = min(max(int(RIM_WINDOW * width) | 1, 3), window)
+    (rim_total, rim_count), (near_total, near_count) = _window_sums(image, rim, (window, near),
+                                                                   flat)
     cable_colour = _mean(rim_total, rim_count)
+    near_colour = _mean(near_total, near_count)
+    apart = _chromaticity(near_colour) - _chromaticity(cable_colour)
+    second = (near_count > 0) & (np.einsum("ij,ij->i", apart, apart) > SECOND_COLOUR**2)
+    cable_colour[second] = near_colour[second]
     alone = rim_count == 0
     if alone.any():  # the inside's sums only where they are needed (rarely)
         cable_colour[alone] = _mean(*_window_sums(image, inner, window, flat[alone]))
     return cable_colour, _mean(*_window_sums(image, beyond, window, flat))
+
+
+def _chromaticity(colours):
+    """Colours (N, 3) divided by their sums, a sum under :data:`CHROMA_FLOOR` counted as it
+    (a dark colour's chromaticity is noise)."""
+    return colours / np.maximum(colours.sum(axis=1), CHROMA_FLOOR)[:, None]
 
 
 def _profile_features(profile, cable_colour, background, features):
