@@ -157,7 +157,10 @@ def test_a_two_tone_cable_s_pale_side_is_searched_again_after_the_outline():
     """Tuning look patterned seed 33: orange along one side, a pinkish white along the other,
     on blue-grey print. Before the outline's classifier the mask holds mixed pixels of the
     white side, so the strip it misses lies within the rim; the classifier takes them for the
-    table, and only a second search after it puts the white side back (0.60 IoU without)."""
+    table, and only a second search after it puts the white side back (0.60 IoU without).
+    Since the classifier reads a two-tone cable's colour from the rim on the pixel's own side
+    (30d1f83), it keeps more of the white side itself and loses a little elsewhere: 0.723
+    without the second search, 0.737 with it (0.78 before)."""
     from engine.stages.segmentation import reference_frames, segment_frame, sequence_colour
     from engine.synthetic.scene import look_scene
 
@@ -165,4 +168,4 @@ def test_a_two_tone_cable_s_pale_side_is_searched_again_after_the_outline():
     colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
     ious = [iou(segment_frame(scene.images[k], colour, model=model).mask, scene.masks[k])
             for k in range(3)]
-    assert np.mean(ious) > 0.75
+    assert np.mean(ious) > 0.73

@@ -52,9 +52,13 @@ REACH = 2
 STEPS = np.arange(-3, 4, dtype=np.float32)
 #: Where the cable's rim near a pixel, within a square this many cable widths wide (odd, 3
 #: pixels at least: the rim on the pixel's side of the cable), is more than
-#: ``SECOND_COLOUR`` in chromaticity from the rim within the whole window, it is the cable's
-#: local colour (see :func:`_colours_around`).
+#: :data:`SECOND_COLOUR` in chromaticity from the rim within the whole window, it is the
+#: cable's local colour (see :func:`_colours_around`).
 RIM_WINDOW = 0.6
+#: How far apart (chromaticity) the near rim and the whole window's are for the near one to
+#: be the cable's colour: a two-tone cable's other side, not a shaded rim (a tinted light
+#: still parts a lit rim from a shaded one by a little: hard light's tuning looks lose about
+#: 0.004 IoU to this).
 SECOND_COLOUR = 0.05
 #: Hidden units of the classifier.
 HIDDEN = 16
