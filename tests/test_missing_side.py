@@ -160,7 +160,7 @@ def test_a_two_tone_cable_s_pale_side_is_searched_again_after_the_outline():
     table, and only a second search after it puts the white side back (0.60 IoU without).
     Since the classifier reads a two-tone cable's colour from the rim on the pixel's own side
     (30d1f83), it keeps more of the white side itself and loses a little elsewhere: 0.723
-    without the second search, 0.737 with it (0.78 before)."""
+    without the second search, 0.737 with it (over 0.75 before)."""
     from engine.stages.segmentation import reference_frames, segment_frame, sequence_colour
     from engine.synthetic.scene import look_scene
 

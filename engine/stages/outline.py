@@ -41,7 +41,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .pixels import CHROMA_FLOOR, cable_box, sample_at
+from .pixels import CHROMA_FLOOR, cable_box, chroma, sample_at
 
 __all__ = ["OutlineClassifier", "REACH", "STEPS", "HIDDEN", "outline_features",
            "outline_classifier", "classify_outline"]
@@ -316,19 +316,13 @@ def _colours_around(image, inside, outside, inner, flat, width, window):
                                                                    flat)
     cable_colour = _mean(rim_total, rim_count)
     near_colour = _mean(near_total, near_count)
-    apart = _chromaticity(near_colour) - _chromaticity(cable_colour)
+    apart = chroma(near_colour, CHROMA_FLOOR) - chroma(cable_colour, CHROMA_FLOOR)
     second = (near_count > 0) & (np.einsum("ij,ij->i", apart, apart) > SECOND_COLOUR**2)
     cable_colour[second] = near_colour[second]
     alone = rim_count == 0
     if alone.any():  # the inside's sums only where they are needed (rarely)
         cable_colour[alone] = _mean(*_window_sums(image, inner, window, flat[alone]))
     return cable_colour, _mean(*_window_sums(image, beyond, window, flat))
-
-
-def _chromaticity(colours):
-    """Colours (N, 3) divided by their sums, a sum under :data:`CHROMA_FLOOR` counted as it
-    (a dark colour's chromaticity is noise)."""
-    return colours / np.maximum(colours.sum(axis=1), CHROMA_FLOOR)[:, None]
 
 
 def _profile_features(profile, cable_colour, background, features):

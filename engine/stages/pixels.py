@@ -10,10 +10,11 @@ __all__ = ["CHROMA_FLOOR", "brightness", "cable_box", "chroma", "sample_at"]
 CHROMA_FLOOR = 60
 
 
-def chroma(rgb):
-    """Chromaticity: colours divided by their sum (the last axis)."""
+def chroma(rgb, floor=1.0):
+    """Chromaticity: colours divided by their sum (the last axis), a sum under ``floor``
+    counted as it (:data:`CHROMA_FLOOR`: a dark colour's chromaticity is noise)."""
     rgb = np.asarray(rgb, dtype=np.float32)
-    return rgb / np.maximum(brightness(rgb), 1.0)[..., None]
+    return rgb / np.maximum(brightness(rgb), floor)[..., None]
 
 
 def brightness(rgb):
