@@ -671,12 +671,18 @@ class ColourModel:
         them (:func:`engine.stages.stripes.banded`): each frame's mask is bridged along the
         cable. Set by :func:`engine.stages.segmentation.sequence_colour` and the other
         learners, from the masks the model gives on the frames it was learnt from.
+    seams : bool
+        The model was learnt again from a banded model's masks and holds both colours of the
+        bands (:func:`engine.stages.segmentation.sequence_colour`): the seams between the
+        bands, mixed pixels of the two colours that neither calls cable, are closed
+        (:data:`engine.stages.stripes.SEAM_REACH`).
     """
 
     def __init__(self, histograms, prior, smoothing=1.0):
         self.histograms, self.prior, self.smoothing = histograms, prior, smoothing
         self.level = None
         self.banded = False
+        self.seams = False
         self.bins = histograms[0][0].shape[0]
         self.luts, self._mats = [], []
         for cable, background in histograms:

@@ -73,6 +73,13 @@ SHADOW_CHROMA = 0.04
 #: average over the frames) lies in pieces smaller than a speck that their closing joins into
 #: chains of at least two specks' area.
 BANDED_SHARE = 0.5
+#: A model learnt again from a banded model's masks takes in the second colour where it is not
+#: the table's, and its masks are the bands of both colours; the seam between two bands (a
+#: pixel or two whose colour is a mix of both, neither colour's) then parts the mask into
+#: pieces, the short ones under a speck's area (patterned tuning seed 54: orange and blue
+#: bands, whole stretches of the cable lost, IoU 0.73). Such masks are closed by a disc of
+#: this many cable widths, which fills a gap up to one width long: a seam, not a band's gap.
+SEAM_REACH = 0.5
 
 
 def gap_pixels(seed, width, reach):
