@@ -154,18 +154,19 @@ def test_a_white_cables_grey_side_on_grey_print_comes_back():
 
 
 def test_a_two_tone_cable_s_pale_side_is_searched_again_after_the_outline():
-    """Tuning look patterned seed 33: orange along one side, a pinkish white along the other,
-    on blue-grey print. Before the outline's classifier the mask holds mixed pixels of the
-    white side, so the strip it misses lies within the rim; the classifier takes them for the
-    table, and only a second search after it puts the white side back (0.60 IoU without).
-    Since the classifier reads a two-tone cable's colour from the rim on the pixel's own side
-    (30d1f83), it keeps more of the white side itself and loses a little elsewhere: 0.723
-    without the second search, 0.737 with it (over 0.75 before)."""
+    """Before the outline's classifier the mask holds mixed pixels of a two-tone cable's
+    missed side, so the strip it misses lies within the rim; the classifier takes them for
+    the table, and a second search after it puts more of the side back. Tuning look patterned
+    seed 4 (green along one side, a pale lilac along the other, on grey paper), frames 0-2:
+    0.630 IoU without the second search, 0.675 with it (each frame 0.62-0.64 and 0.67-0.68).
+    Seed 33 (orange and pinkish white on blue-grey print), which this test used until the
+    classifier read a two-tone cable's colour from the rim on the pixel's own side (30d1f83),
+    now keeps most of its white side by the classifier alone: 0.710 without, 0.737 with."""
     from engine.stages.segmentation import reference_frames, segment_frame, sequence_colour
     from engine.synthetic.scene import look_scene
 
-    scene = look_scene("patterned", 33, views=10, width=960, height=720)
+    scene = look_scene("patterned", 4, views=10, width=960, height=720)
     colour, model = sequence_colour([scene.images[k] for k in reference_frames(10, 0, 3)])
     ious = [iou(segment_frame(scene.images[k], colour, model=model).mask, scene.masks[k])
             for k in range(3)]
-    assert np.mean(ious) > 0.73
+    assert np.mean(ious) > 0.66
