@@ -47,6 +47,11 @@ _SHARPER = 2.0
 _CLUSTERS = 8
 #: A candidate enclosing more holes than this is penalised as a net, not a cable.
 _MAX_LOOPS = 12
+#: A candidate parting the frame into more regions that touch its border than this is
+#: penalised as a net too: a table's grout or print lines run out of the view, so most of the
+#: cells between them touch the border, where a cable lying in the view leaves one such region
+#: (its loops lie inside it), two or three where it runs out of the view.
+_MAX_BORDER_REGIONS = 3
 #: A cable covers at most this share of a frame.
 _MAX_COVERAGE = 0.3
 #: :func:`find_cables`: weighs ``_MORE`` candidates; another cable scores at least ``_ANOTHER``
@@ -148,10 +153,17 @@ def _score(mask, lab, diagonal, pieces=None):
     inside, outside = np.median(lab[cable], axis=0), np.median(lab[ring], axis=0)
     lightness, chroma = abs(inside[0] - outside[0]), np.hypot(*(inside[1:] - outside[1:]))
     contrast = float(np.hypot(lightness, 2.0 * chroma))
-    # a net (tiles' grout, a weave) encloses many holes; a cable only a loop per crossing
-    holes = cv2.connectedComponentsWithStats((~cable).view(np.uint8), connectivity=4)[2]
-    holes = int((holes[1:, cv2.CC_STAT_AREA] > 4.0 * width * width).sum()) - 1
-    net = 1.0 / (1.0 + max(holes - _MAX_LOOPS, 0) / _MAX_LOOPS)
+    # a net (tiles' grout, a weave) encloses many holes; a cable only a loop per crossing. A
+    # net's lines also run out of the view, its cells to the frame's border
+    regions = cv2.connectedComponentsWithStats((~cable).view(np.uint8), connectivity=4)[2][1:]
+    large = regions[:, cv2.CC_STAT_AREA] > 4.0 * width * width
+    left, top = regions[:, cv2.CC_STAT_LEFT], regions[:, cv2.CC_STAT_TOP]
+    right = left + regions[:, cv2.CC_STAT_WIDTH]
+    bottom = top + regions[:, cv2.CC_STAT_HEIGHT]
+    border = large & ((left == 0) | (top == 0) | (right == mask.shape[1])
+                      | (bottom == mask.shape[0]))
+    net = 1.0 / (1.0 + max(int(large.sum()) - 1 - _MAX_LOOPS, 0) / _MAX_LOOPS)
+    net /= 1.0 + max(int(border.sum()) - _MAX_BORDER_REGIONS, 0) / _MAX_BORDER_REGIONS
     score = thin_share ** 2 * min(length, 1.5) * contrast * net
     return float(score)
 
