@@ -149,6 +149,34 @@ def test_a_t_junction_joins_the_straight_pair_and_ends_the_third_branch():
     assert any("3 branches" in w for w in topology.warnings)
 
 
+def test_a_cable_end_lying_across_a_strand_crosses_it_over_or_under():
+    # a T whose third branch (90°) is a cable end lying over the strand (0° / 180°): its stub
+    # beyond the strand is too short for the carving, but the branch lies 1.5 r higher
+    for lift, sign in ((1.5, 1.0), (-1.5, -1.0)):
+        topology = resolve_topology(crossing_graph([0, 180, 90], [0.0, 0.0, lift]), [],
+                                    radius=R, up=UP)
+        assert len(topology.paths) == 2
+        assert {end_of(0), end_of(180)} in [far_ends(p) for p in topology.paths]
+        assert len(topology.crossings) == 1
+        crossing = topology.crossings[0]
+        end, strand = (crossing.over, crossing.under) if sign > 0 else \
+            (crossing.under, crossing.over)
+        end_path = topology.paths[end[0]]
+        assert end_of(90) in far_ends(end_path)
+        # the end goes on through the junction to 3 r beyond it, across the strand
+        assert end_path.points[:, 1].min() == pytest.approx(-3.0 * R, abs=0.3 * R)
+        high, low = (topology.paths[p].points[i] for p, i in (crossing.over, crossing.under))
+        assert np.linalg.norm(high[:2]) < 0.5 * R and np.linalg.norm(low[:2]) < 0.5 * R
+        assert (high - low) @ UP >= 2.0 * R
+        assert crossing.confidence > 0.95  # the pairing's probability times the heights'
+        assert any("taken for a cable end crossing" in w for w in topology.warnings)
+    # off: the end stops short of the strand
+    off = resolve_topology(crossing_graph([0, 180, 90], [0.0, 0.0, 1.5]), [], radius=R, up=UP,
+                           settings=TopologySettings(end_crossing_height=0.0))
+    assert off.crossings == ()
+    assert min(p.points[:, 1].min() for p in off.paths) > -0.5 * R
+
+
 def test_a_short_spur_at_a_crossing_is_dropped():
     # an X (A over B) plus a 4 r stub of carving noise: five branches
     graph = crossing_graph([0, 75, 185, 250, 130], [2.2, 0.0, 2.2, 0.0, 0.0],
@@ -252,9 +280,11 @@ def test_a_twist_carved_as_one_segment_is_two_strands_and_two_crossings():
     assert far_ends(topology.paths[0]) == {end_of(160.0), end_of(200.0)}
     assert len(topology.crossings) == 2
     assert any("taken for two strands" in w for w in topology.warnings)
-    # without it each junction joins its straightest two branches and ends the third
+    # without it each junction joins its straightest two branches and ends the third (at
+    # its strand, with the ends that cross a strand off too)
     plain = resolve_topology(graph, [], radius=R, up=UP,
-                             settings=TopologySettings(bigon_length=0.0))
+                             settings=TopologySettings(bigon_length=0.0,
+                                                       end_crossing_height=0.0))
     assert len(plain.crossings) < 2 and not any("two strands" in w for w in plain.warnings)
     # a long segment between two junctions missing a branch each is left alone
     assert not any("two strands" in w for w in resolve_topology(

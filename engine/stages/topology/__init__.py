@@ -64,7 +64,10 @@ odd number of branches and no spur, near a free end whose cable heads towards it
 branch: the gap is bridged. Two such junctions joined by a short segment
 (``bigon_length``) are two crossings of a twist whose strands lie together between them:
 the segment is doubled, its copies a radius either side. Degree 2 junctions are passed
-through, degree 3 junctions join their straightest two branches and end the third, junctions
+through, degree 3 junctions join their straightest two branches and end the third: at the
+strand, or, where it lies ``end_crossing_height`` above or below the strand, a few radii past
+it, crossing it (a cable end lying across a strand: its stub beyond is too short for the
+carving, which removes short dead ends, so the junction has three branches), junctions
 of more than ``max_degree`` branches are paired greedily by bending, and paths shorter than
 ``min_path_length`` are dropped; each gives a warning.
 

@@ -39,7 +39,8 @@ def assemble(junctions, choice, marginals, context, warnings):
     edges = {(d["start"], d["end"], k): d for _, _, k, d in g.edges(keys=True, data=True)}
     pieces = _walk_pieces(g, edges, partner)
     paths, bridges = _piece_paths(pieces, edges, spurs, branch_of, partner, context, warnings)
-    crossings = _place_crossings(junctions, choice, marginals, bridges, paths, context)
+    ends = _end_crossings(junctions, choice, marginals, bridges, paths, context, warnings)
+    crossings = _place_crossings(junctions, choice, marginals, bridges, paths, context) + ends
     for _ in range(2):  # bumps of nearby crossings overlap: settle them twice
         for crossing in crossings:
             _separate(paths, crossing, context)
@@ -301,6 +302,110 @@ def _place_crossings(junctions, choice, marginals, bridges, paths, context):
                       "pairing_probability": matching_p, "views": len(votes)},
                 views=votes))
     return crossings
+
+
+def _end_crossings(junctions, choice, marginals, bridges, paths, context, warnings):
+    """Cable ends that cross a strand: at a junction whose chosen matching pairs one strand and
+    leaves one branch unpaired (not a spur), where that branch lies at least
+    ``end_crossing_height`` higher or lower than the strand (each as high as its branches'
+    centrelines near their branch points), the branch's path goes on through the junction's
+    centre to ``end_crossing_reach`` beyond it, and crosses the strand there, over when
+    higher. A cable end lying across a strand ends a few radii beyond it, a stub the carving
+    leaves out (the segment graph removes short dead ends): the junction has three branches.
+    An end touching a strand, or a spur, lies at the strand's height and stays an end.
+
+    The paths are extended in place (spans of ``bridges`` on a path extended at its start
+    move with it). Returns the crossings as :func:`_place_crossings` gives them, the
+    confidence the matching's probability times the height cue's for the order.
+    """
+    s, r = context.settings, context.r
+    if s.end_crossing_height <= 0:
+        return []
+    found = []
+    for junction in junctions:
+        if junction.node not in choice:
+            continue
+        m = choice[junction.node]
+        pairs, unpaired, _ = junction.matchings[m]
+        ends = [k for k in unpaired if not junction.branches[k].spur]
+        if len(pairs) != 1 or len(ends) != 1 or (junction.node, pairs[0]) not in bridges:
+            continue
+        branch = junction.branches[ends[0]]
+        lift = branch.height - float(np.mean([junction.branches[k].height for k in pairs[0]]))
+        located = _path_end(paths, branch, junction.centre, context)
+        if abs(lift) < s.end_crossing_height * r or located is None:
+            continue
+        number, at_start = located
+        span, shift = _extend_end(paths, bridges, number, at_start, junction.centre, context)
+        for crossing in found:  # ends found before on the path move with it too
+            for side in ("over", "under"):
+                if crossing[side][0] == number:
+                    crossing[side] = (number, crossing[side][1] + shift)
+        height = float(np.clip(lift / (s.height_scale * r), -s.height_cap, s.height_cap))
+        matching_p = marginals.get(junction.node, 1.0)
+        others = np.delete(junction.matching_log_p, m)
+        margin = float(junction.matching_log_p[m] - (others.max() if len(others) else -np.inf))
+        strand_path, strand_span = bridges[(junction.node, pairs[0])]
+        end_index, strand_index = _closest_pass(paths[number][0], span,
+                                                paths[strand_path][0], strand_span, context)
+        end, strand = (number, end_index), (strand_path, strand_index)
+        found.append(dict(
+            over=end if lift > 0 else strand, under=strand if lift > 0 else end,
+            confidence=matching_p / (1.0 + math.exp(-2.0 * abs(height))),
+            junction=junction.node,
+            cues={"height": 2.0 * abs(height), "image": 0.0,
+                  "pairing": margin if np.isfinite(margin) else 99.0,
+                  "pairing_probability": matching_p, "views": 0},
+            views=()))
+        warnings.append(f"junction {junction.node}: its third branch, {abs(lift) / r:.1f} r "
+                        f"{'above' if lift > 0 else 'below'} the strand through it, taken for "
+                        f"a cable end crossing {'over' if lift > 0 else 'under'} it")
+    return found
+
+
+def _path_end(paths, branch, centre, context):
+    """``(path, at its start)``: the open path's end that is the unpaired ``branch``'s cut end
+    at the junction (``centre``), or None."""
+    best = None
+    for number, (points, closed, path_edges) in enumerate(paths):
+        if closed or not path_edges:
+            continue
+        for at_start, edge in ((True, path_edges[0]), (False, path_edges[-1])):
+            if edge != branch.edge:
+                continue
+            distance = float(np.linalg.norm(context.flat(points[0 if at_start else -1]
+                                                         - centre)))
+            if best is None or distance < best[0]:
+                best = (distance, number, at_start)
+    if best is None or best[0] > (context.settings.bridge_distance + 2.0) * context.r:
+        return None
+    return best[1], best[2]
+
+
+def _extend_end(paths, bridges, number, at_start, centre, context):
+    """Path ``number`` carried on from its end (its start if ``at_start``) through the
+    junction's ``centre`` to ``end_crossing_reach`` beyond it, at the end's height; the
+    extension's span on the path, and how far the path's old points moved along it."""
+    points = paths[number][0]
+    tip = points[0] if at_start else points[-1]
+    across = (centre - tip) - ((centre - tip) @ context.up) * context.up  # horizontal
+    inward = across / max(np.linalg.norm(across), 1e-12)
+    far = tip + across + context.settings.end_crossing_reach * context.r * inward
+    chord = float(np.linalg.norm(far - tip))
+    count = max(int(math.ceil(chord / max(context.spacing, 1e-12))), 2) + 1
+    tangent = end_tangent(points, context, at_start)
+    curve, _, _ = hermite(tip, (-tangent if at_start else tangent) * chord, far,
+                          inward * chord, count)
+    added = curve[1:]
+    if at_start:
+        paths[number][0] = np.vstack([added[::-1], points])
+        shift = len(added)
+        for key, (path, (first, last)) in list(bridges.items()):
+            if path == number:
+                bridges[key] = (path, (first + shift, last + shift))
+        return (0, shift), shift
+    paths[number][0] = np.vstack([points, added])
+    return (len(points) - 1, len(points) + len(added) - 1), 0
 
 
 def _span_indices(span, count):

@@ -97,7 +97,7 @@ class Junction:
         elif degree == 3:
             warnings.append(f"junction {node} has 3 branches (a cable end touching the cable, "
                             "a spur, or a missed branch): the straightest two are joined, the "
-                            "third ends there")
+                            "third ends there, across the strand if it lies above or below it")
         elif degree > 4:
             warnings.append(f"junction {node} has {degree} branches: several crossings merged "
                             "into one")

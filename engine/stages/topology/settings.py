@@ -85,6 +85,12 @@ class TopologySettings:
     bigon_length : float
         A segment up to this long between two junctions that each miss a branch is taken for
         two strands lying together between two crossings, and doubled (0: never).
+    end_crossing_height : float
+        A junction's one unpaired branch (not a spur) beside one strand, this much higher or
+        lower than the strand, is a cable end crossing over or under it: its path goes on
+        through the junction (0: never; it ends there).
+    end_crossing_reach : float
+        How far beyond the junction's centre such an end goes.
     min_path_length : float
         Paths shorter than this (specks of carving noise) are dropped, unless nothing else is
         left.
@@ -133,6 +139,8 @@ class TopologySettings:
     unpaired_cost: float = setting(4.0, low=0)
     gap_length: float = setting(10.0, low=0, unit="r")
     bigon_length: float = setting(30.0, low=0, unit="r")
+    end_crossing_height: float = setting(0.5, low=0, unit="r")
+    end_crossing_reach: float = setting(3.0, above=0, unit="r")
     min_path_length: float = setting(10.0, low=0, unit="r")
     bridge_distance: float = setting(2.5, above=0, unit="r")
     separation: float = setting(2.2, low=0, unit="r")
