@@ -170,6 +170,43 @@ def test_a_cable_end_lying_across_a_strand_crosses_it_over_or_under():
         assert (high - low) @ UP >= 2.0 * R
         assert crossing.confidence > 0.95  # the pairing's probability times the heights'
         assert any("taken for a cable end crossing" in w for w in topology.warnings)
+    # a cable whose two ends each lie over a strand (one at its path's start, one at its end)
+    centre = np.array([0.0, 40.0, 1.0])
+    y = np.arange(0.0, 40.0 + 1e-9, 0.3)
+    near = np.cos(0.5 * np.pi * np.clip(np.minimum(y, 40.0 - y) / 8.0, 0, 1)) ** 2
+    cable = np.column_stack([np.zeros_like(y), y, 1.0 + 1.5 * near])
+    strands = [ray(0), ray(180), ray(0, centre=centre), ray(180, centre=centre)]
+    graph = graph_from({0: ("junction", (0.0, 0.0, 1.0)), 5: ("junction", centre),
+                        **{k + 1: ("end", points[-1]) for k, points in enumerate(strands)}},
+                       [(0, 1, strands[0]), (0, 2, strands[1]), (5, 3, strands[2]),
+                        (5, 4, strands[3]), (0, 5, cable)])
+    both = resolve_topology(graph, [], radius=R, up=UP)
+    assert len(both.crossings) == 2 and len(both.paths) == 3
+    for crossing in both.crossings:
+        high, low = (both.paths[p].points[i] for p, i in (crossing.over, crossing.under))
+        assert abs(high[0]) < 0.5 * R and min(abs(high[1]), abs(high[1] - 40.0)) < 0.5 * R
+        assert np.allclose(low[:2], high[:2], atol=0.5 * R) and (high - low) @ UP >= 2.0 * R
+    ends = next(p.points for p in both.paths if abs(p.points[:, 0]).max() < 1e-6)
+    assert ends[:, 1].min() == pytest.approx(-3.0 * R, abs=0.3 * R)
+    assert ends[:, 1].max() == pytest.approx(43.0 * R, abs=0.3 * R)
+    # one strand crossing another at an X, then ending across a third: the X's crossing stays
+    # where it is when the end is added at its path's start (whichever way the walk goes)
+    for forward in (True, False):
+        x = [ray(0), ray(180), ray(270, lift=2.2)]
+        leg = cable + np.array([0.0, 0.0, 1.2]) * (cable[:, 1] < 20.0)[:, None] * near[:, None]
+        graph = graph_from({0: ("junction", (0.0, 0.0, 1.0)), 5: ("junction", centre),
+                            **{k: ("end", points[-1]) for k, points in
+                               zip((1, 2, 6, 3, 4), x + strands[2:])}},
+                           [(0, 1, x[0]), (0, 2, x[1]), (0, 6, x[2]), (5, 3, strands[2]),
+                            (5, 4, strands[3])]
+                           + [(0, 5, leg) if forward else (5, 0, leg[::-1])])
+        topology = resolve_topology(graph, [], radius=R, up=UP)
+        assert len(topology.crossings) == 2
+        for crossing in topology.crossings:
+            high, low = (topology.paths[p].points[i] for p, i in (crossing.over,
+                                                                   crossing.under))
+            assert np.allclose(low[:2], high[:2], atol=0.5 * R) and abs(high[0]) < 0.5 * R
+            assert (high - low) @ UP >= 2.0 * R
     # off: the end stops short of the strand
     off = resolve_topology(crossing_graph([0, 180, 90], [0.0, 0.0, 1.5]), [], radius=R, up=UP,
                            settings=TopologySettings(end_crossing_height=0.0))
