@@ -328,6 +328,24 @@ def test_a_twist_carved_as_one_segment_is_two_strands_and_two_crossings():
         graph, [], radius=R, up=UP, settings=TopologySettings(bigon_length=5.0)).warnings)
 
 
+def test_of_two_segments_joining_two_junctions_that_miss_a_branch_the_higher_is_doubled():
+    # two strands crossing at a shallow angle lie one over the other between two junctions of
+    # three branches (carved as one segment, higher than one strand), and a small loop on the
+    # table closes between the same two junctions: shorter, but one strand
+    t = np.linspace(0.0, 1.0, 41)
+    stacked = np.column_stack([12.0 * t, -5.0 * np.sin(np.pi * t), 1.0 + np.sin(np.pi * t)])
+    table = np.column_stack([12.0 * t, np.zeros_like(t), np.ones_like(t)])
+    first, second = ray(180.0), ray(0.0, centre=(12.0, 0.0, 1.0))
+    graph = graph_from({"A": ("junction", (0.0, 0.0, 1.0)), "B": ("junction", (12.0, 0.0, 1.0)),
+                        "E1": ("end", first[-1]), "E2": ("end", second[-1])},
+                       [("A", "E1", first), ("B", "E2", second), ("A", "B", stacked),
+                        ("A", "B", table)])
+    length = np.linalg.norm(np.diff(stacked, axis=0), axis=1).sum()
+    warnings = resolve_topology(graph, [], radius=R, up=UP).warnings
+    doubled = [w for w in warnings if "taken for two strands" in w]
+    assert len(doubled) == 1 and f"segment of {length:.1f} r" in doubled[0]
+
+
 def test_the_one_path_check_overrides_a_pairing_that_splits_the_cable():
     # Two round lobes through one junction, each leaving and coming back straight: pairing each
     # lobe with itself is the straightest, but makes two loops that meet at a single point (two

@@ -136,16 +136,27 @@ def double_bigons(context, warnings):
     crossings; the carving often gives one segment there, and each crossing then has three
     branches. The missing branch of each is that second strand: the segment is doubled, and
     the topology pairs and orders the strands through both junctions as at any crossing.
+    Where several segments join the same two junctions, the highest is doubled: a small loop
+    closing at a shallow crossing joins them too, on the table, while the two strands lie one
+    over the other along the other segment (hard tuning seed 9: the loop, the shorter, was
+    doubled, and the cable came out wrongly joined).
     """
     graph, r, s = context.graph, context.r, context.settings
     if s.bigon_length <= 0:
         return graph
     g = graph.graph
     odd = _odd_junctions(g, r, s)
-    candidates = sorted((data["length"], u, v, key) for u, v, key, data in g.edges(keys=True,
-                                                                                   data=True)
-                        if u != v and u in odd and v in odd
-                        and data["length"] <= s.bigon_length * r)
+    # of several segments joining the same two junctions, the highest: two strands that cross
+    # at a shallow angle lie one over the other along it (a small loop closing at such a
+    # crossing joins the two junctions too, lying on the table)
+    highest = {}
+    for u, v, key, data in g.edges(keys=True, data=True):
+        if u != v and u in odd and v in odd and data["length"] <= s.bigon_length * r:
+            height = float(np.mean(np.asarray(data["points"], dtype=float) @ context.up))
+            ends = (min(u, v), max(u, v))
+            if ends not in highest or height > highest[ends][0]:
+                highest[ends] = (height, (data["length"], u, v, key))
+    candidates = sorted(candidate for _, candidate in highest.values())
     if not candidates:
         return graph
     g = g.copy()
