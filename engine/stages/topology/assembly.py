@@ -268,11 +268,7 @@ def _bridge(incoming, outgoing, context):
 def _place_crossings(junctions, choice, marginals, bridges, paths, context):
     """Crossings at the chosen matchings: where the bridges of two strands pass each other."""
     crossings = []
-    for junction in junctions:
-        if junction.node not in choice:
-            continue
-        m = choice[junction.node]
-        pairs, _, crossing_pairs = junction.matchings[m]
+    for junction, m, (pairs, _, crossing_pairs) in _chosen(junctions, choice):
         members = [k for k, h in enumerate(junction.hypotheses) if h[0] == m]
         if not crossing_pairs or not members:
             continue
@@ -280,28 +276,40 @@ def _place_crossings(junctions, choice, marginals, bridges, paths, context):
         best = members[int(np.argmax(log_p))]
         orders = junction.hypotheses[best][1]
         within = np.exp(log_p - logsumexp(log_p))
-        matching_p = marginals.get(junction.node, 1.0)
-        others = np.delete(junction.matching_log_p, m)
-        margin = float(junction.matching_log_p[m] - (others.max() if len(others) else -np.inf))
         for c, ((a, b), first_over) in enumerate(zip(crossing_pairs, orders)):
             over, under = (pairs[a], pairs[b]) if first_over else (pairs[b], pairs[a])
             if (junction.node, over) not in bridges or (junction.node, under) not in bridges:
                 continue
             same = sum(w for w, k in zip(within, members) if junction.hypotheses[k][1][c]
                        == first_over)
-            confidence = matching_p * same
-            height, image, votes = junction.crossing_cues(over, under, context)
             o_path, o_span = bridges[(junction.node, over)]
             u_path, u_span = bridges[(junction.node, under)]
             oi, ui = _closest_pass(paths[o_path][0], o_span, paths[u_path][0], u_span, context)
-            crossings.append(dict(
-                over=(o_path, oi), under=(u_path, ui), confidence=confidence,
-                junction=junction.node,
+            crossings.append(_crossing((o_path, oi), (u_path, ui), same, junction, m, marginals,
+                                       *junction.crossing_cues(over, under, context)))
+    return crossings
+
+
+def _chosen(junctions, choice):
+    """``(junction, matching index, matching)`` of each junction with a chosen matching."""
+    for junction in junctions:
+        if junction.node in choice:
+            m = choice[junction.node]
+            yield junction, m, junction.matchings[m]
+
+
+def _crossing(over, under, order_p, junction, m, marginals, height, image, votes):
+    """A placed crossing: ``over`` and ``under`` (path, index), its confidence (the matching's
+    probability times ``order_p``, the order's within it) and its cues (each cue's log-odds
+    for the order, the matching's margin over the next and the views' votes)."""
+    matching_p = marginals.get(junction.node, 1.0)
+    others = np.delete(junction.matching_log_p, m)
+    margin = float(junction.matching_log_p[m] - (others.max() if len(others) else -np.inf))
+    return dict(over=over, under=under, confidence=matching_p * order_p, junction=junction.node,
                 cues={"height": 2.0 * height, "image": 2.0 * image,
                       "pairing": margin if np.isfinite(margin) else 99.0,
                       "pairing_probability": matching_p, "views": len(votes)},
-                views=votes))
-    return crossings
+                views=votes)
 
 
 def _end_crossings(junctions, choice, marginals, bridges, paths, context, warnings):
@@ -322,11 +330,7 @@ def _end_crossings(junctions, choice, marginals, bridges, paths, context, warnin
     if s.end_crossing_height <= 0:
         return []
     found = []
-    for junction in junctions:
-        if junction.node not in choice:
-            continue
-        m = choice[junction.node]
-        pairs, unpaired, _ = junction.matchings[m]
+    for junction, m, (pairs, unpaired, _) in _chosen(junctions, choice):
         ends = [k for k in unpaired if not junction.branches[k].spur]
         if len(pairs) != 1 or len(ends) != 1 or (junction.node, pairs[0]) not in bridges:
             continue
@@ -341,22 +345,14 @@ def _end_crossings(junctions, choice, marginals, bridges, paths, context, warnin
             for side in ("over", "under"):
                 if crossing[side][0] == number:
                     crossing[side] = (number, crossing[side][1] + shift)
-        height = float(np.clip(lift / (s.height_scale * r), -s.height_cap, s.height_cap))
-        matching_p = marginals.get(junction.node, 1.0)
-        others = np.delete(junction.matching_log_p, m)
-        margin = float(junction.matching_log_p[m] - (others.max() if len(others) else -np.inf))
+        height = float(np.clip(abs(lift) / (s.height_scale * r), 0.0, s.height_cap))
         strand_path, strand_span = bridges[(junction.node, pairs[0])]
         end_index, strand_index = _closest_pass(paths[number][0], span,
                                                 paths[strand_path][0], strand_span, context)
         end, strand = (number, end_index), (strand_path, strand_index)
-        found.append(dict(
-            over=end if lift > 0 else strand, under=strand if lift > 0 else end,
-            confidence=matching_p / (1.0 + math.exp(-2.0 * abs(height))),
-            junction=junction.node,
-            cues={"height": 2.0 * abs(height), "image": 0.0,
-                  "pairing": margin if np.isfinite(margin) else 99.0,
-                  "pairing_probability": matching_p, "views": 0},
-            views=()))
+        over, under = (end, strand) if lift > 0 else (strand, end)
+        found.append(_crossing(over, under, 1.0 / (1.0 + math.exp(-2.0 * height)), junction, m,
+                               marginals, height, 0.0, ()))
         warnings.append(f"junction {junction.node}: its third branch, {abs(lift) / r:.1f} r "
                         f"{'above' if lift > 0 else 'below'} the strand through it, taken for "
                         f"a cable end crossing {'over' if lift > 0 else 'under'} it")
