@@ -169,7 +169,7 @@ def test_a_cable_end_lying_across_a_strand_crosses_it_over_or_under():
         assert np.linalg.norm(high[:2]) < 0.5 * R and np.linalg.norm(low[:2]) < 0.5 * R
         assert (high - low) @ UP >= 2.0 * R
         assert crossing.confidence > 0.95  # the pairing's probability times the heights'
-        assert any("taken for a cable end crossing" in w for w in topology.warnings)
+        assert any("taken to cross" in w for w in topology.warnings)
     # a cable whose two ends each lie over a strand (one at its path's start, one at its end)
     centre = np.array([0.0, 40.0, 1.0])
     y = np.arange(0.0, 40.0 + 1e-9, 0.3)

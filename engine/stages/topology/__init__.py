@@ -66,8 +66,8 @@ branch: the gap is bridged. Two such junctions joined by a short segment
 the segment is doubled, its copies a radius either side. Degree 2 junctions are passed
 through, degree 3 junctions join their straightest two branches and end the third: at the
 strand, or, where it lies ``end_crossing_height`` above or below the strand, a few radii past
-it, crossing it (a cable end lying across a strand: its stub beyond is too short for the
-carving, which removes short dead ends, so the junction has three branches), junctions
+it, crossing it (a cable end lying across a strand, its stub beyond too short for the
+carving, which removes short dead ends; or a branch the carving missed), junctions
 of more than ``max_degree`` branches are paired greedily by bending, and paths shorter than
 ``min_path_length`` are dropped; each gives a warning.
 

@@ -313,14 +313,16 @@ def _crossing(over, under, order_p, junction, m, marginals, height, image, votes
 
 
 def _end_crossings(junctions, choice, marginals, bridges, paths, context, warnings):
-    """Cable ends that cross a strand: at a junction whose chosen matching pairs one strand and
-    leaves one branch unpaired (not a spur), where that branch lies at least
+    """Third branches that cross a strand: at a junction whose chosen matching pairs one strand
+    and leaves one branch unpaired (not a spur), where that branch lies at least
     ``end_crossing_height`` higher or lower than the strand (each as high as its branches'
     centrelines near their branch points), the branch's path goes on through the junction's
     centre to ``end_crossing_reach`` beyond it, and crosses the strand there, over when
     higher. A cable end lying across a strand ends a few radii beyond it, a stub the carving
-    leaves out (the segment graph removes short dead ends): the junction has three branches.
-    An end touching a strand, or a spur, lies at the strand's height and stays an end.
+    leaves out (the segment graph removes short dead ends), and a strand crossing another may
+    have lost its continuation to the carving with no free end left to bridge to: either way
+    the junction has three branches. An end touching a strand, or a spur, lies at the strand's
+    height and stays an end.
 
     The paths are extended in place (spans of ``bridges`` on a path extended at its start
     move with it). Returns the crossings as :func:`_place_crossings` gives them, the
@@ -354,8 +356,9 @@ def _end_crossings(junctions, choice, marginals, bridges, paths, context, warnin
         found.append(_crossing(over, under, 1.0 / (1.0 + math.exp(-2.0 * height)), junction, m,
                                marginals, height, 0.0, ()))
         warnings.append(f"junction {junction.node}: its third branch, {abs(lift) / r:.1f} r "
-                        f"{'above' if lift > 0 else 'below'} the strand through it, taken for "
-                        f"a cable end crossing {'over' if lift > 0 else 'under'} it")
+                        f"{'above' if lift > 0 else 'below'} the strand through it, taken to "
+                        f"cross {'over' if lift > 0 else 'under'} it (a cable end lying across "
+                        "it, or a branch the carving missed)")
     return found
 
 

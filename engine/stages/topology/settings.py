@@ -87,8 +87,9 @@ class TopologySettings:
         two strands lying together between two crossings, and doubled (0: never).
     end_crossing_height : float
         A junction's one unpaired branch (not a spur) beside one strand, this much higher or
-        lower than the strand, is a cable end crossing over or under it: its path goes on
-        through the junction (0: never; it ends there).
+        lower than the strand, crosses over or under it (a cable end lying across the strand,
+        or a branch the carving missed): its path goes on through the junction (0: never; it
+        ends there).
     end_crossing_reach : float
         How far beyond the junction's centre such an end goes.
     min_path_length : float
