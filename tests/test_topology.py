@@ -159,9 +159,7 @@ def test_a_cable_end_lying_across_a_strand_crosses_it_over_or_under():
         assert {end_of(0), end_of(180)} in [far_ends(p) for p in topology.paths]
         assert len(topology.crossings) == 1
         crossing = topology.crossings[0]
-        end, strand = (crossing.over, crossing.under) if sign > 0 else \
-            (crossing.under, crossing.over)
-        end_path = topology.paths[end[0]]
+        end_path = topology.paths[(crossing.over if sign > 0 else crossing.under)[0]]
         assert end_of(90) in far_ends(end_path)
         # the end goes on through the junction to 3 r beyond it, across the strand
         assert end_path.points[:, 1].min() == pytest.approx(-3.0 * R, abs=0.3 * R)
