@@ -183,24 +183,44 @@ def test_window_sums_are_a_box_filter_s_at_every_pixel_and_edge(windows):
         assert np.array_equal(colours, box[:, :3]) and np.array_equal(counts, box[:, 3])
 
 
-def test_the_cable_s_colour_is_its_rim_s_on_the_pixel_s_side():
-    """A two-tone cable (a blue side and a dark red one along its length, 20 pixels wide on
-    grey): a pixel on the red side's outline has the red rim for the cable's colour, not the
-    mean of both sides (a window of two widths holds both; the classifier then took the red
-    side's dark rim for the table)."""
+def _two_sided(first, second):
+    """A cable 20 pixels wide along a grey frame, its upper side ``first``'s colour and its
+    lower ``second``'s, and its colours around every band pixel
+    (:func:`outline._colours_around`, a window of 41): ``(cable, background, upper, lower)``,
+    the last two the band pixels along each side's outline."""
     image = np.full((100, 160, 3), 150, np.uint8)
-    image[40:50] = (40, 60, 200)
-    image[50:60] = (120, 30, 40)
+    image[40:50], image[50:60] = first, second
     mask = np.zeros((100, 160), bool)
     mask[40:60] = True
     pixels, _ = outline.outline_features(mask, image, 20.0)
     rows, cols = np.divmod(pixels, 160)
     inside, outside = outline._distances(mask.view(np.uint8))
-    inner = inside > outline.REACH
-    red_side = np.flatnonzero((rows >= 55) & (cols > 30) & (cols < 130))
-    blue_side = np.flatnonzero((rows < 45) & (cols > 30) & (cols < 130))
-    cable, background = outline._colours_around(image, inside, outside, inner, pixels, 20.0,
-                                                41)
+    along = (cols > 30) & (cols < 130)
+    cable, background = outline._colours_around(image, inside, outside, inside > outline.REACH,
+                                                pixels, 20.0, 41)
+    return cable, background, np.flatnonzero((rows < 45) & along), \
+        np.flatnonzero((rows >= 55) & along)
+
+
+def test_the_cable_s_colour_is_its_rim_s_on_the_pixel_s_side():
+    """A two-tone cable (a blue side and a dark red one along its length, 20 pixels wide on
+    grey): a pixel on the red side's outline has the red rim for the cable's colour, not the
+    mean of both sides (a window of two widths holds both; the classifier then took the red
+    side's dark rim for the table)."""
+    cable, background, blue_side, red_side = _two_sided((40, 60, 200), (120, 30, 40))
     assert np.allclose(cable[red_side], (120, 30, 40))
     assert np.allclose(cable[blue_side], (40, 60, 200))
     assert np.allclose(background[red_side], 150)
+
+
+def test_a_shade_side_of_the_cable_s_own_hue_is_not_a_second_colour():
+    """A red cable whose shade side is its own red, less saturated and darker (tinted by the
+    light a table throws: over SECOND_COLOUR from the lit side in chromaticity): a pixel on
+    the shade side's outline keeps the whole window's rim for the cable's colour (the near-rim
+    rule alone took the shade side's, and the easy scenes' masks lost 0.01 r), while a side of
+    another hue keeps its own (the two-tone test above)."""
+    apart = (outline.chroma(np.float32([[100, 34, 28]]), outline.CHROMA_FLOOR)
+             - outline.chroma(np.float32([[125, 34, 27.5]]), outline.CHROMA_FLOOR))
+    assert np.linalg.norm(apart) > outline.SECOND_COLOUR  # the distance alone would take it
+    cable, _, _, shade = _two_sided((150, 34, 27), (100, 34, 28))
+    assert np.all(np.abs(cable[shade] - (125, 34, 27.5)) < 3.0)

@@ -23,8 +23,10 @@ the mean of the pixels up to half a cable width beyond it, both within a window 
 widths: local, so uneven light or a printed table do not mislead them. Such a window holds
 the cable's rim on both of its edges, and a two-tone cable's are of its two colours: where
 the rim within a smaller window (:data:`RIM_WINDOW`), on the pixel's side, is of another
-chromaticity than the whole window's, it is the cable's colour (with the mean of both, the
-dark rim of a blue side beside a red one lay off the axis and was taken for the table).
+chromaticity than the whole window's, and of another hue (:data:`HUE_APART`: not a shade
+side of the cable's own hue, tinted by the light around), it is the cable's colour (with the
+mean of both, the dark rim of a blue side beside a red one lay off the axis and was taken for
+the table).
 
 A small network (one hidden layer of :data:`HIDDEN` units, ``tanh``, logistic output) turns the
 features into the pixel's label; its weights (``outline_weights.json`` beside this module)
@@ -35,6 +37,7 @@ decision can be repeated: each pass decides the band around the outline the last
 
 import functools
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -57,9 +60,15 @@ STEPS = np.arange(-3, 4, dtype=np.float32)
 RIM_WINDOW = 0.6
 #: How far apart (chromaticity) the near rim and the whole window's are for the near one to
 #: be the cable's colour: a two-tone cable's other side, not a shaded rim (a tinted light
-#: still parts a lit rim from a shaded one by a little: hard light's tuning looks lose about
-#: 0.004 IoU to this).
+#: parts a lit rim from a shaded one by as much, but keeps their hue: :data:`HUE_APART`).
 SECOND_COLOUR = 0.05
+#: A near rim is of a second colour only if its hue is this many degrees (around grey, in
+#: chromaticity) from the whole window's rim, or either is within :data:`GREYISH` times the
+#: other's distance of grey: a glossy red cable's shade side, tinted by the light a wooden
+#: table throws, is over :data:`SECOND_COLOUR` from its lit side but of its hue.
+HUE_APART = 25.0
+#: See :data:`HUE_APART`.
+GREYISH = 0.5
 #: Hidden units of the classifier.
 HIDDEN = 16
 #: The weights shipped with the engine.
@@ -306,9 +315,10 @@ def _colours_around(image, inside, outside, inner, flat, width, window):
     mask's pixels right inside the band within ``window`` (a glossy cable's highlight farther
     in is not its rim's colour; the whole inside where the rim has none there), or within
     :data:`RIM_WINDOW` cable widths where the rim there is of another chromaticity
-    (:data:`SECOND_COLOUR`: a two-tone cable's side, whose rim across the cable is the other
-    colour); and of the pixels up to half a width beyond the band, within ``window``.
-    ``inner``: the mask's pixels past the band (``inside`` over :data:`REACH`)."""
+    (:data:`SECOND_COLOUR`) and hue (:func:`_another_hue`): a two-tone cable's side, whose rim
+    across the cable is the other colour; and of the pixels up to half a width beyond the
+    band, within ``window``. ``inner``: the mask's pixels past the band (``inside`` over
+    :data:`REACH`)."""
     rim = inner & (inside <= REACH + 2)
     beyond = (outside > REACH) & (outside <= REACH + width // 2)
     near = min(max(int(RIM_WINDOW * width) | 1, 3), window)
@@ -316,13 +326,29 @@ def _colours_around(image, inside, outside, inner, flat, width, window):
                                                                    flat)
     cable_colour = _mean(rim_total, rim_count)
     near_colour = _mean(near_total, near_count)
-    apart = chroma(near_colour, CHROMA_FLOOR) - chroma(cable_colour, CHROMA_FLOOR)
-    second = (near_count > 0) & (np.einsum("ij,ij->i", apart, apart) > SECOND_COLOUR**2)
+    near_chroma = chroma(near_colour, CHROMA_FLOOR)
+    whole_chroma = chroma(cable_colour, CHROMA_FLOOR)
+    apart = near_chroma - whole_chroma
+    second = (near_count > 0) & (np.einsum("ij,ij->i", apart, apart) > SECOND_COLOUR**2) \
+        & _another_hue(near_chroma, whole_chroma)
     cable_colour[second] = near_colour[second]
     alone = rim_count == 0
     if alone.any():  # the inside's sums only where they are needed (rarely)
         cable_colour[alone] = _mean(*_window_sums(image, inner, window, flat[alone]))
     return cable_colour, _mean(*_window_sums(image, beyond, window, flat))
+
+
+def _another_hue(first, second):
+    """Whether chromaticities ``first`` and ``second`` (rows) are of other hues: more than
+    :data:`HUE_APART` apart around grey's, or one of them within :data:`GREYISH` times the
+    other's distance of grey (a white or grey side beside a coloured one). One hue more or
+    less saturated is a cable's shade side tinted by the light around it, not a second colour."""
+    grey = np.float32(1.0 / 3.0)
+    a, b = first - grey, second - grey
+    na, nb = np.sqrt(np.einsum("ij,ij->i", a, a)), np.sqrt(np.einsum("ij,ij->i", b, b))
+    cosine = np.einsum("ij,ij->i", a, b) / np.maximum(na * nb, 1e-9)
+    return (cosine < math.cos(math.radians(HUE_APART))) \
+        | (np.minimum(na, nb) < GREYISH * np.maximum(na, nb))
 
 
 def _profile_features(profile, cable_colour, background, features):
